@@ -1,0 +1,443 @@
+//! Design checks: pressure angle, self-locking, undercut, cutter fit and contact stress.
+//!
+//! Each check reports pass / warn / fail with its value, limit and where it happens. A failing
+//! check says what to change and by how much: the advice is found by re-synthesising the
+//! pitch curve with the changed spring rate or preload and solving (Brent's method) for the
+//! value at which the check just passes, so following the advice does make the check pass.
+
+use roots::{find_root_brent, SimpleConvergency};
+use serde::Serialize;
+
+use super::follower::Follower;
+use super::forces::RodForce;
+use super::pitch_curve::{synthesize, PitchCurve, SynthesisOptions};
+use super::surface::CamSurface;
+use crate::law::ExpLaw;
+use crate::spec::ChecksSpec;
+
+/// Outcome of a check.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Status {
+    /// Within the limit with margin.
+    Pass,
+    /// Within the limit but close, or a concern that does not stop the part being made.
+    Warn,
+    /// Outside the limit.
+    Fail,
+}
+
+impl Status {
+    /// Lower-case name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Status::Pass => "pass",
+            Status::Warn => "warn",
+            Status::Fail => "fail",
+        }
+    }
+}
+
+/// One check's result.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Check {
+    /// Check name: pressure_angle, self_locking, undercut, cutter_fit, contact_stress.
+    pub name: &'static str,
+    /// Outcome.
+    pub status: Status,
+    /// The measured value (None when the check does not apply).
+    pub value: Option<f64>,
+    /// The limit it is compared with.
+    pub limit: f64,
+    /// Unit of value and limit.
+    pub unit: &'static str,
+    /// Where along the stroke the value occurs.
+    pub at_x_mm: Option<f64>,
+    /// What was found, in words.
+    pub message: String,
+    /// What to change, with numbers (for warn and fail).
+    pub advice: Option<String>,
+}
+
+/// Everything the checks need.
+#[derive(Debug)]
+pub struct CheckInput<'a> {
+    /// The law.
+    pub law: &'a ExpLaw,
+    /// The followers.
+    pub follower: &'a Follower,
+    /// Stroke.
+    pub xmax_mm: f64,
+    /// Sampling used for the design (reused for advice searches).
+    pub options: SynthesisOptions,
+    /// Limits.
+    pub limits: &'a ChecksSpec,
+    /// Part thickness (contact length).
+    pub thickness_mm: f64,
+    /// Cutter radius.
+    pub tool_radius_mm: f64,
+    /// The pitch curve.
+    pub pitch: &'a PitchCurve,
+    /// The cam surface.
+    pub surface: &'a CamSurface,
+    /// The predicted forces.
+    pub forces: &'a [RodForce],
+}
+
+/// Margin applied to advice so that following it passes with a little room.
+const ADVICE_MARGIN: f64 = 1.01;
+/// A pitch radius below this multiple of the roller radius is a warning.
+const UNDERCUT_WARN_RATIO: f64 = 1.1;
+
+/// Runs all checks.
+pub fn run_checks(input: &CheckInput<'_>) -> Vec<Check> {
+    vec![
+        pressure_angle(input),
+        self_locking(input),
+        undercut(input),
+        cutter_fit(input),
+        contact_stress(input),
+    ]
+}
+
+/// Angle extremes of a re-synthesised curve, for the advice searches.
+struct AngleMetrics {
+    max_theta_deg: f64,
+    min_theta_deg: f64,
+    min_material_radius_mm: f64,
+}
+
+fn metrics(input: &CheckInput<'_>, follower: &Follower) -> Option<AngleMetrics> {
+    let pitch = synthesize(input.law, follower, input.xmax_mm, &input.options).ok()?;
+    Some(AngleMetrics {
+        max_theta_deg: pitch.max_pressure_angle().0,
+        min_theta_deg: pitch
+            .samples
+            .iter()
+            .map(|s| s.theta_rad.to_degrees())
+            .fold(f64::INFINITY, f64::min),
+        min_material_radius_mm: pitch
+            .min_material_side_radius()
+            .map_or(f64::INFINITY, |m| m.0),
+    })
+}
+
+/// Finds p in [lo, hi] where g(p) = 0, given g(lo) > 0 >= g(hi) (g is a metric minus its
+/// target). Returns None when the interval does not bracket a sign change.
+fn threshold(lo: f64, hi: f64, mut g: impl FnMut(f64) -> f64) -> Option<f64> {
+    let (glo, ghi) = (g(lo), g(hi));
+    if !(glo > 0.0 && ghi <= 0.0) {
+        return None;
+    }
+    let mut conv = SimpleConvergency {
+        eps: 1e-7 * hi.abs().max(1e-6),
+        max_iter: 80,
+    };
+    find_root_brent(
+        lo,
+        hi,
+        |p| {
+            let v = g(p);
+            if v.is_nan() {
+                1.0
+            } else {
+                v
+            }
+        },
+        &mut conv,
+    )
+    .ok()
+}
+
+fn round_up(v: f64) -> f64 {
+    let scale = 10f64.powi(3 - v.abs().log10().ceil() as i32);
+    (v * ADVICE_MARGIN * scale).ceil() / scale
+}
+
+fn round_down(v: f64) -> f64 {
+    let scale = 10f64.powi(3 - v.abs().log10().ceil() as i32);
+    (v / ADVICE_MARGIN * scale).floor() / scale
+}
+
+/// Advice to bring the largest pressure angle to at most `target_deg`, by spring rate or preload.
+fn angle_advice(input: &CheckInput<'_>, target_deg: f64) -> String {
+    let f = input.follower;
+    let ks0 = f.spring_rate_n_per_mm;
+    let by_rate = threshold(ks0.ln(), (ks0 * 1e4).ln(), |lk| {
+        metrics(input, &f.with_spring_rate(lk.exp()))
+            .map_or(f64::NAN, |m| m.max_theta_deg - target_deg)
+    })
+    .map(f64::exp);
+    let yp0 = f.preload_mm;
+    let yp_hi = yp0 + 20.0 * input.xmax_mm + 100.0;
+    let by_preload = threshold(yp0, yp_hi, |yp| {
+        metrics(input, &f.with_preload(yp)).map_or(f64::NAN, |m| m.max_theta_deg - target_deg)
+    });
+    let keep = format!("to keep the pressure angle at or below {target_deg:.2} deg");
+    match (by_rate, by_preload) {
+        (Some(ks), Some(yp)) => format!(
+            "Raise follower.spring_rate from {ks0} to at least {} N/mm, or follower.preload from {yp0} to at least {} mm, {keep}.",
+            round_up(ks),
+            round_up(yp)
+        ),
+        (Some(ks), None) => format!("Raise follower.spring_rate from {ks0} to at least {} N/mm {keep}.", round_up(ks)),
+        (None, Some(yp)) => format!(
+            "Raise follower.preload from {yp0} to at least {} mm {keep}; no spring rate alone can, because \
+             the angle near x = 0 is set by the preload.",
+            round_up(yp)
+        ),
+        (None, None) => format!("Neither spring rate nor preload alone can {keep}; lower the force law's fmax or raise xmax."),
+    }
+}
+
+fn capitalise(mut s: String) -> String {
+    if let Some(first) = s.get(..1) {
+        let upper = first.to_uppercase();
+        s.replace_range(..1, &upper);
+    }
+    s
+}
+
+fn pressure_angle(input: &CheckInput<'_>) -> Check {
+    let (theta, at) = input.pitch.max_pressure_angle();
+    let limit = input.limits.max_pressure_angle_deg;
+    let status = if theta > limit {
+        Status::Fail
+    } else if theta > limit - 2.0 {
+        Status::Warn
+    } else {
+        Status::Pass
+    };
+    Check {
+        name: "pressure_angle",
+        status,
+        value: Some(theta),
+        limit,
+        unit: "deg",
+        at_x_mm: Some(at),
+        message: format!(
+            "largest pressure angle {theta:.2} deg at x = {at:.3} mm (limit {limit} deg)"
+        ),
+        advice: (status == Status::Fail).then(|| angle_advice(input, limit)),
+    }
+}
+
+fn self_locking(input: &CheckInput<'_>) -> Check {
+    let phi = input.follower.friction_angle_rad().to_degrees();
+    let (max_theta, at_max) = input.pitch.max_pressure_angle();
+    let (min_theta, at_min) = input
+        .pitch
+        .samples
+        .iter()
+        .map(|s| (s.theta_rad.to_degrees(), s.x_mm))
+        .fold((f64::INFINITY, 0.0), |m, v| if v.0 < m.0 { v } else { m });
+    let load_margin = 90.0 - (max_theta + phi);
+    let unload_margin = min_theta - phi;
+    let limit = input.limits.min_locking_margin_deg;
+    // Loading must keep the margin; unloading only has to return the rod (theta - phi > 0),
+    // with a warning when the return is weak (below the margin).
+    let load_fails = load_margin < limit;
+    let unload_fails = unload_margin <= 0.0;
+    let loading_worse =
+        load_fails || (!unload_fails && load_margin - limit <= unload_margin - limit);
+    let (value, at) = if loading_worse {
+        (load_margin, at_max)
+    } else {
+        (unload_margin, at_min)
+    };
+    let status = if load_fails || unload_fails {
+        Status::Fail
+    } else if load_margin < limit + 5.0 || unload_margin < limit {
+        Status::Warn
+    } else {
+        Status::Pass
+    };
+    let message = if loading_worse {
+        format!(
+            "loading margin to jamming 90 - (theta + phi) = {load_margin:.2} deg at x = {at_max:.3} mm \
+             (phi = {phi:.2} deg); unloading margin theta - phi = {unload_margin:.2} deg"
+        )
+    } else {
+        format!(
+            "unloading margin theta - phi = {unload_margin:.2} deg at x = {at_min:.3} mm (phi = {phi:.2} deg): \
+             below zero the spring cannot push the rod back; loading margin {load_margin:.2} deg"
+        )
+    };
+    let advice = (status != Status::Pass).then(|| {
+        if loading_worse {
+            angle_advice(input, 90.0 - phi - limit)
+        } else {
+            // theta is large near x = 0 with little preload, so the largest acceptable preload
+            // is where target - min_theta(yp) changes sign between the current preload and 0.
+            let f = input.follower;
+            let target = phi + limit;
+            let largest = threshold(f.preload_mm, 0.0, |yp| {
+                metrics(input, &f.with_preload(yp)).map_or(f64::NAN, |m| target - m.min_theta_deg)
+            });
+            match largest {
+                Some(yp) => format!(
+                    "Lower follower.preload from {} to at most {} mm, or reduce friction, so that the \
+                     spring returns the rod with theta - phi >= {limit} deg.",
+                    f.preload_mm,
+                    round_down(yp)
+                ),
+                None => "Reduce friction: the pressure angle near the start is too small to overcome it.".into(),
+            }
+        }
+    });
+    Check {
+        name: "self_locking",
+        status,
+        value: Some(value),
+        limit,
+        unit: "deg",
+        at_x_mm: Some(at),
+        message,
+        advice,
+    }
+}
+
+fn undercut(input: &CheckInput<'_>) -> Check {
+    let r = input.follower.roller_radius_mm;
+    let rho = input.pitch.min_material_side_radius();
+    let folded = !input.surface.is_followable();
+    let status = if folded || rho.is_some_and(|(rho, _)| rho <= r) {
+        Status::Fail
+    } else if rho.is_some_and(|(rho, _)| rho < UNDERCUT_WARN_RATIO * r) {
+        Status::Warn
+    } else {
+        Status::Pass
+    };
+    let spans: Vec<String> = input
+        .surface
+        .unfollowable_spans()
+        .iter()
+        .map(|s| format!("[{:.3}, {:.3}] mm", s.x_start_mm, s.x_end_mm))
+        .collect();
+    let message = match (rho, status) {
+        (None, _) => "the pitch curve never bends towards the cam material; no undercut possible".to_string(),
+        (Some((rho, at)), Status::Fail) => format!(
+            "undercut: the pitch curve bends towards the material with radius {rho:.4} mm at x = {at:.3} mm, \
+             tighter than the roller radius {r} mm; the roller cannot follow for x in {}",
+            if spans.is_empty() { "a short stretch".to_string() } else { spans.join(", ") }
+        ),
+        (Some((rho, at)), _) => format!(
+            "smallest pitch-curve radius on the material side {rho:.4} mm at x = {at:.3} mm (roller radius {r} mm)"
+        ),
+    };
+    let advice = (status != Status::Pass).then(|| {
+        let f = input.follower;
+        let wanted = UNDERCUT_WARN_RATIO * r;
+        let yp_hi = f.preload_mm + 20.0 * input.xmax_mm + 100.0;
+        let by_preload = threshold(f.preload_mm, yp_hi, |yp| {
+            metrics(input, &f.with_preload(yp)).map_or(f64::NAN, |m| wanted - m.min_material_radius_mm)
+        });
+        let mut parts = Vec::new();
+        if let Some(yp) = by_preload {
+            parts.push(format!(
+                "raise follower.preload from {} to at least {} mm (the smallest preload that removes the undercut with {:.0} % margin)",
+                f.preload_mm,
+                round_up(yp),
+                (UNDERCUT_WARN_RATIO - 1.0) * 100.0
+            ));
+        }
+        if let Some((rho, _)) = rho {
+            parts.push(format!("use a roller radius of at most {} mm", round_down(rho / UNDERCUT_WARN_RATIO)));
+        }
+        capitalise(parts.join(", or ")) + "."
+    });
+    Check {
+        name: "undercut",
+        status,
+        value: rho.map(|r| r.0),
+        limit: r,
+        unit: "mm",
+        at_x_mm: rho.map(|r| r.1),
+        message,
+        advice,
+    }
+}
+
+fn cutter_fit(input: &CheckInput<'_>) -> Check {
+    let tool = input.tool_radius_mm;
+    let concave = input.surface.min_concave_radius(input.pitch);
+    let status = match concave {
+        Some((rad, _)) if rad < tool => Status::Fail,
+        _ => Status::Pass,
+    };
+    let message = match concave {
+        None => format!("the cam surface has no concave part; any cutter fits (tool radius {tool} mm)"),
+        Some((rad, at)) => format!(
+            "smallest concave radius of the cam surface {rad:.4} mm at x = {at:.3} mm: cutters up to {:.3} mm diameter fit (tool radius {tool} mm)",
+            2.0 * rad
+        ),
+    };
+    Check {
+        name: "cutter_fit",
+        status,
+        value: concave.map(|c| c.0),
+        limit: tool,
+        unit: "mm",
+        at_x_mm: concave.map(|c| c.1),
+        message,
+        advice: (status == Status::Fail).then(|| {
+            format!(
+                "Use an end mill of at most {} mm diameter, or a larger roller (the concave radius is the pitch radius plus the roller radius).",
+                round_down(2.0 * concave.map_or(0.0, |c| c.0))
+            )
+        }),
+    }
+}
+
+fn contact_stress(input: &CheckInput<'_>) -> Check {
+    let limit = input.limits.max_contact_stress_mpa;
+    let unbounded = input.forces.iter().find(|f| f.contact_stress_mpa.is_none());
+    let worst = input
+        .forces
+        .iter()
+        .filter_map(|f| f.contact_stress_mpa.map(|p| (p, f.x_mm)))
+        .fold(None, |m: Option<(f64, f64)>, v| match m {
+            Some(m) if m.0 >= v.0 => Some(m),
+            _ => Some(v),
+        });
+    if let Some(at) = unbounded {
+        return Check {
+            name: "contact_stress",
+            status: Status::Fail,
+            value: None,
+            limit,
+            unit: "MPa",
+            at_x_mm: Some(at.x_mm),
+            message: format!(
+                "contact stress is unbounded at x = {:.3} mm (knife-edge follower, folded surface, or jammed followers)",
+                at.x_mm
+            ),
+            advice: Some("Use a roller (roller_radius > 0) and clear the undercut and self-locking checks first.".into()),
+        };
+    }
+    let (p, at) = worst.unwrap_or((0.0, 0.0));
+    let status = if p > limit {
+        Status::Fail
+    } else if p > 0.8 * limit {
+        Status::Warn
+    } else {
+        Status::Pass
+    };
+    Check {
+        name: "contact_stress",
+        status,
+        value: Some(p),
+        limit,
+        unit: "MPa",
+        at_x_mm: Some(at),
+        message: format!("peak Hertz line-contact pressure {p:.1} MPa at x = {at:.3} mm (limit {limit:.1} MPa)"),
+        advice: (status != Status::Pass).then(|| {
+            // p ~ 1/sqrt(thickness): the thickness that brings p to 0.8 * limit.
+            let b = input.thickness_mm * (p / (0.8 * limit)).powi(2);
+            format!(
+                "Make part.thickness at least {} mm (p scales with 1/sqrt(thickness)), use a larger roller, or a stronger cam material.",
+                round_up(b)
+            )
+        }),
+    }
+}

@@ -1,0 +1,128 @@
+//! The design pipeline: a validated [`Spec`] in, a complete [`Design`] out.
+//!
+//! Spec -> law (solved or given) -> pitch curve (virtual work with preload and friction
+//! correction) -> cam surface (roller offset) -> predicted forces -> checks. Pure computation:
+//! no files, no printing.
+
+use crate::cam::checks::{run_checks, Check, CheckInput, Status};
+use crate::cam::forces::{contact_modulus_mpa, predict, ContactModel, RodForce};
+use crate::cam::pitch_curve::{synthesize, CamError, PitchCurve, SynthesisOptions};
+use crate::cam::surface::{offset, CamSurface};
+use crate::law::{check_law, solve, LawError, SolvedLaw};
+use crate::spec::{LawSpec, Spec};
+
+/// Number of arc-length steps the stroke is at least divided into (for smooth plots).
+pub const MIN_SAMPLES_PER_STROKE: f64 = 250.0;
+
+/// Why a spec could not be turned into a design.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DesignError {
+    /// Produced by [`design`] when the law cannot be solved or realised.
+    #[error("force law: {0}")]
+    Law(#[from] LawError),
+    /// Produced by [`design`] when no pitch curve can follow the law with these followers.
+    #[error("cam synthesis: {0}")]
+    Cam(#[from] CamError),
+}
+
+/// A complete design.
+#[derive(Debug, Clone)]
+pub struct Design {
+    /// The spec it was made from.
+    pub spec: Spec,
+    /// The law.
+    pub law: SolvedLaw,
+    /// The roller-centre path.
+    pub pitch_curve: PitchCurve,
+    /// The machined surface.
+    pub cam_surface: CamSurface,
+    /// Predicted forces and contact stress at each sample.
+    pub forces: Vec<RodForce>,
+    /// Check results.
+    pub checks: Vec<Check>,
+}
+
+impl Design {
+    /// The worst status over all checks.
+    pub fn status(&self) -> Status {
+        self.checks
+            .iter()
+            .map(|c| c.status)
+            .max()
+            .unwrap_or(Status::Pass)
+    }
+
+    /// The stroke.
+    pub fn xmax_mm(&self) -> f64 {
+        self.spec.law.xmax_mm()
+    }
+}
+
+/// The sampling options a spec asks for.
+pub fn synthesis_options(spec: &Spec) -> SynthesisOptions {
+    SynthesisOptions {
+        chord_tolerance_mm: spec.output.chord_tolerance_mm,
+        max_step_mm: spec.law.xmax_mm() / MIN_SAMPLES_PER_STROKE,
+    }
+}
+
+/// Solves or takes the law of a spec.
+pub fn law_of(spec: &Spec) -> Result<SolvedLaw, LawError> {
+    match &spec.law {
+        LawSpec::Targets(t) => solve(t),
+        LawSpec::Given { law, .. } => {
+            check_law(law)?;
+            Ok(SolvedLaw {
+                law: *law,
+                alpha: None,
+                residuals: None,
+            })
+        }
+    }
+}
+
+/// Runs the whole design.
+///
+/// ```
+/// use camspring::{design::design, spec::{Spec, DEFAULT_SPEC_TOML}};
+/// let d = design(&Spec::from_toml(DEFAULT_SPEC_TOML).unwrap()).unwrap();
+/// assert!((d.law.alpha.unwrap() - 1.3201914760).abs() < 1e-9);
+/// assert!(d.pitch_curve.lift_mm() > 0.0);
+/// ```
+pub fn design(spec: &Spec) -> Result<Design, DesignError> {
+    let law = law_of(spec)?;
+    let options = synthesis_options(spec);
+    let follower = &spec.follower;
+    let xmax = spec.law.xmax_mm();
+    let pitch_curve = synthesize(&law.law, follower, xmax, &options)?;
+    let cam_surface = offset(
+        &pitch_curve,
+        follower.roller_radius_mm,
+        2.0 * options.chord_tolerance_mm,
+    );
+    let contact = ContactModel {
+        e_star_mpa: contact_modulus_mpa(&spec.part.cam_material, &spec.part.roller_material),
+        length_mm: spec.part.thickness_mm.min(spec.part.roller_width_mm),
+    };
+    let forces = predict(&law.law, follower, &pitch_curve, &cam_surface, &contact);
+    let checks = run_checks(&CheckInput {
+        law: &law.law,
+        follower,
+        xmax_mm: xmax,
+        options,
+        limits: &spec.checks,
+        thickness_mm: contact.length_mm,
+        tool_radius_mm: spec.machining.tool_diameter_mm / 2.0,
+        pitch: &pitch_curve,
+        surface: &cam_surface,
+        forces: &forces,
+    });
+    Ok(Design {
+        spec: spec.clone(),
+        law,
+        pitch_curve,
+        cam_surface,
+        forces,
+        checks,
+    })
+}

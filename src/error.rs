@@ -1,0 +1,62 @@
+//! The crate's top-level error: everything a command can fail with, sorted by exit code.
+
+use std::path::PathBuf;
+
+use crate::design::DesignError;
+use crate::spec::SpecError;
+
+/// Any failure of a camspring command.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// Produced by [`crate::run::load_spec`] when the spec is invalid.
+    #[error("spec {path}: {source}")]
+    Spec {
+        /// The spec file (or "built-in default").
+        path: String,
+        /// What is wrong.
+        #[source]
+        source: SpecError,
+    },
+    /// Produced by [`crate::design::design`] (through the commands) when the spec cannot be realised.
+    #[error(transparent)]
+    Design(#[from] DesignError),
+    /// Produced when an input file cannot be read.
+    #[error("cannot read {path}: {source}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The OS error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// Produced by the exporters when an output cannot be written.
+    #[error("cannot write {path}: {source}")]
+    Write {
+        /// The file.
+        path: PathBuf,
+        /// The OS error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// Produced by the exporters when an output cannot be encoded.
+    #[error("cannot encode {what}: {message}")]
+    Encode {
+        /// Which output.
+        what: &'static str,
+        /// Why.
+        message: String,
+    },
+}
+
+impl Error {
+    /// Whether the user's input is at fault (exit code 2) rather than the machine (exit code 3).
+    pub fn is_bad_input(&self) -> bool {
+        matches!(
+            self,
+            Error::Spec { .. } | Error::Design(_) | Error::Read { .. }
+        )
+    }
+}
+
+/// Result with the crate's error.
+pub type Result<T, E = Error> = std::result::Result<T, E>;

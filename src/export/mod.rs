@@ -1,0 +1,411 @@
+//! Writing a design to files: `design.json`, `profile.csv`, `force.svg`, `profile.svg`.
+//!
+//! Exporters read the design and never change it. Every file is written to a temporary file
+//! in the same folder and renamed into place, so an interrupted run leaves either the old file
+//! or the new one, never a half-written one.
+
+pub mod plot;
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use serde::Serialize;
+
+use crate::cam::checks::{Check, Status};
+use crate::cam::follower::{FrictionCorrection, SpringArrangement};
+use crate::design::Design;
+use crate::error::{Error, Result};
+use crate::law::Residuals;
+use crate::spec::Spec;
+use plot::{Panel, Series};
+
+/// Writes `bytes` to `path` atomically (temporary file in the same folder, then rename).
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let wrap = |source| Error::Write {
+        path: path.to_path_buf(),
+        source,
+    };
+    std::fs::create_dir_all(dir).map_err(wrap)?;
+    let mut tmp = tempfile::Builder::new()
+        .prefix(".camspring-")
+        .suffix(".tmp")
+        .tempfile_in(dir)
+        .map_err(wrap)?;
+    tmp.write_all(bytes).map_err(wrap)?;
+    tmp.as_file().sync_all().map_err(wrap)?;
+    tmp.persist(path).map_err(|e| wrap(e.error))?;
+    Ok(())
+}
+
+/// The law block of `design.json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct LawSummary {
+    /// alpha = k2 * L0 (null for a given law).
+    pub alpha: Option<f64>,
+    /// mu.
+    pub mu_n: f64,
+    /// F0.
+    pub f0_n: f64,
+    /// k2.
+    pub k2_per_mm: f64,
+    /// F(0) = mu + F0.
+    pub force_at_zero_n: f64,
+    /// F(Xmax).
+    pub force_at_xmax_n: f64,
+    /// Relative residuals of the design conditions.
+    pub residuals: Option<Residuals>,
+}
+
+/// The follower block of `design.json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct FollowerSummary {
+    /// Number of followers.
+    pub count: u8,
+    /// Spring arrangement.
+    pub spring: SpringArrangement,
+    /// Rate of each spring.
+    pub spring_rate_n_per_mm: f64,
+    /// k_eff.
+    pub k_eff_n_per_mm: f64,
+    /// Preload.
+    pub preload_mm: f64,
+    /// Preload force of the springs, k_eff * Yp.
+    pub preload_force_n: f64,
+    /// Roller radius.
+    pub roller_radius_mm: f64,
+    /// Effective contact friction coefficient.
+    pub friction_coefficient: f64,
+    /// Friction angle.
+    pub friction_angle_deg: f64,
+    /// Correction.
+    pub friction_correction: FrictionCorrection,
+}
+
+/// The profile block of `design.json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct ProfileSummary {
+    /// Stroke.
+    pub xmax_mm: f64,
+    /// Follower lift at Xmax.
+    pub lift_mm: f64,
+    /// Largest pressure angle.
+    pub max_pressure_angle_deg: f64,
+    /// Where.
+    pub max_pressure_angle_at_x_mm: f64,
+    /// Smallest pitch-curve radius towards the material (null: never bends that way).
+    pub min_pitch_radius_material_side_mm: Option<f64>,
+    /// Smallest concave radius of the surface (largest cutter radius).
+    pub min_concave_surface_radius_mm: Option<f64>,
+    /// Smallest convex radius of the surface.
+    pub min_convex_surface_radius_mm: Option<f64>,
+    /// Predicted loading force at Xmax (null: jammed).
+    pub loading_force_at_xmax_n: Option<f64>,
+    /// Predicted unloading force at Xmax.
+    pub unloading_force_at_xmax_n: f64,
+    /// Largest relative deviation of the corrected stroke's predicted force from the law.
+    pub corrected_stroke_max_rel_error: Option<f64>,
+    /// Peak contact pressure over the stroke.
+    pub max_contact_stress_mpa: Option<f64>,
+    /// Number of samples.
+    pub samples: usize,
+    /// Chord tolerance of the sampled curves.
+    pub chord_tolerance_mm: f64,
+}
+
+/// Everything in `design.json` (and `design --json`).
+#[derive(Debug, Clone, Serialize)]
+pub struct DesignSummary {
+    /// Tool version.
+    pub camspring_version: &'static str,
+    /// Design name.
+    pub name: String,
+    /// Overall status: the worst check.
+    pub status: Status,
+    /// The spec as understood, in default units.
+    pub spec: Spec,
+    /// The law.
+    pub law: LawSummary,
+    /// The followers.
+    pub follower: FollowerSummary,
+    /// Profile numbers.
+    pub profile: ProfileSummary,
+    /// Checks.
+    pub checks: Vec<Check>,
+    /// Files written, relative to the output folder.
+    pub outputs: Vec<String>,
+}
+
+/// The largest relative deviation of the corrected stroke's predicted force from the law.
+pub fn corrected_stroke_error(design: &Design) -> Option<f64> {
+    let corr = design.spec.follower.friction_correction;
+    let frictionless = design.spec.follower.friction_coefficient() == 0.0;
+    design
+        .forces
+        .iter()
+        .map(|f| {
+            let predicted = match (corr, frictionless) {
+                (_, true) | (FrictionCorrection::Loading, _) => f.loading_n,
+                (FrictionCorrection::Unloading, _) => Some(f.unloading_n),
+                (FrictionCorrection::Midline, _) => f.loading_n.map(|l| 0.5 * (l + f.unloading_n)),
+                (FrictionCorrection::None, false) => return None,
+            };
+            predicted.map(|p| ((p - f.design_n) / f.design_n).abs())
+        })
+        .try_fold(0.0_f64, |m, e| e.map(|e| m.max(e)))
+}
+
+/// Builds the summary of a design.
+pub fn summarize(design: &Design, outputs: &[&str]) -> DesignSummary {
+    let spec = &design.spec;
+    let f = &spec.follower;
+    let law = &design.law.law;
+    let xmax = design.xmax_mm();
+    let (theta, theta_at) = design.pitch_curve.max_pressure_angle();
+    let last = design.forces.last().expect("a design has samples");
+    DesignSummary {
+        camspring_version: env!("CARGO_PKG_VERSION"),
+        name: spec.name.clone(),
+        status: design.status(),
+        spec: spec.clone(),
+        law: LawSummary {
+            alpha: design.law.alpha,
+            mu_n: law.mu_n,
+            f0_n: law.f0_n,
+            k2_per_mm: law.k2_per_mm,
+            force_at_zero_n: law.force_n(0.0),
+            force_at_xmax_n: law.force_n(xmax),
+            residuals: design.law.residuals,
+        },
+        follower: FollowerSummary {
+            count: f.count,
+            spring: f.arrangement,
+            spring_rate_n_per_mm: f.spring_rate_n_per_mm,
+            k_eff_n_per_mm: f.k_eff_n_per_mm(),
+            preload_mm: f.preload_mm,
+            preload_force_n: f.k_eff_n_per_mm() * f.preload_mm,
+            roller_radius_mm: f.roller_radius_mm,
+            friction_coefficient: f.friction_coefficient(),
+            friction_angle_deg: f.friction_angle_rad().to_degrees(),
+            friction_correction: f.friction_correction,
+        },
+        profile: ProfileSummary {
+            xmax_mm: xmax,
+            lift_mm: design.pitch_curve.lift_mm(),
+            max_pressure_angle_deg: theta,
+            max_pressure_angle_at_x_mm: theta_at,
+            min_pitch_radius_material_side_mm: design
+                .pitch_curve
+                .min_material_side_radius()
+                .map(|r| r.0),
+            min_concave_surface_radius_mm: design
+                .cam_surface
+                .min_concave_radius(&design.pitch_curve)
+                .map(|r| r.0),
+            min_convex_surface_radius_mm: design
+                .cam_surface
+                .min_convex_radius(&design.pitch_curve)
+                .map(|r| r.0),
+            loading_force_at_xmax_n: last.loading_n,
+            unloading_force_at_xmax_n: last.unloading_n,
+            corrected_stroke_max_rel_error: corrected_stroke_error(design),
+            max_contact_stress_mpa: design
+                .forces
+                .iter()
+                .map(|f| f.contact_stress_mpa)
+                .try_fold(0.0_f64, |m, p| p.map(|p| m.max(p))),
+            samples: design.pitch_curve.samples.len(),
+            chord_tolerance_mm: spec.output.chord_tolerance_mm,
+        },
+        checks: design.checks.clone(),
+        outputs: outputs.iter().map(|s| s.to_string()).collect(),
+    }
+}
+
+/// The header of `profile.csv`.
+pub const PROFILE_CSV_HEADER: [&str; 9] = [
+    "x_mm",
+    "pitch_y_mm",
+    "surface_x_mm",
+    "surface_y_mm",
+    "pressure_angle_deg",
+    "force_design_n",
+    "force_loading_n",
+    "force_unloading_n",
+    "stiffness_n_per_mm",
+];
+
+/// `profile.csv`: one row per pitch sample.
+pub fn profile_csv(design: &Design) -> Result<Vec<u8>> {
+    let enc = |e: csv::Error| Error::Encode {
+        what: "profile.csv",
+        message: e.to_string(),
+    };
+    let mut w = csv::Writer::from_writer(Vec::new());
+    w.write_record(PROFILE_CSV_HEADER).map_err(enc)?;
+    for ((s, p), f) in design
+        .pitch_curve
+        .samples
+        .iter()
+        .zip(&design.cam_surface.points)
+        .zip(&design.forces)
+    {
+        let num = |v: f64| format!("{v:.9}");
+        w.write_record([
+            num(s.x_mm),
+            num(s.y_mm),
+            num(p.x_mm),
+            num(p.y_mm),
+            num(s.theta_rad.to_degrees()),
+            num(f.design_n),
+            f.loading_n.map(num).unwrap_or_default(),
+            num(f.unloading_n),
+            num(f.stiffness_n_per_mm),
+        ])
+        .map_err(enc)?;
+    }
+    w.into_inner().map_err(|e| Error::Encode {
+        what: "profile.csv",
+        message: e.to_string(),
+    })
+}
+
+/// `force.svg`: force against deflection (design, loading, unloading) and stiffness against force.
+pub fn force_svg(design: &Design) -> String {
+    let law = &design.law.law;
+    let pts = |f: &dyn Fn(&crate::cam::forces::RodForce) -> Option<(f64, f64)>| {
+        design.forces.iter().filter_map(f).collect::<Vec<_>>()
+    };
+    let force = Panel {
+        title: "Rod force".into(),
+        x_label: "deflection x (mm)".into(),
+        y_label: "force F (N)".into(),
+        series: vec![
+            Series {
+                label: "designed law".into(),
+                points: pts(&|f| Some((f.x_mm, f.design_n))),
+                color: "#000",
+                dashed: false,
+            },
+            Series {
+                label: "predicted loading".into(),
+                points: pts(&|f| f.loading_n.map(|l| (f.x_mm, l))),
+                color: "#c62828",
+                dashed: true,
+            },
+            Series {
+                label: "predicted unloading".into(),
+                points: pts(&|f| Some((f.x_mm, f.unloading_n))),
+                color: "#1565c0",
+                dashed: true,
+            },
+        ],
+        ..Panel::default()
+    };
+    // Loading stiffness from central differences of the predicted loading force.
+    let loading_stiffness: Vec<(f64, f64)> = design
+        .forces
+        .windows(3)
+        .filter_map(|w| match (w[0].loading_n, w[1].loading_n, w[2].loading_n) {
+            (Some(a), Some(b), Some(c)) if w[2].x_mm > w[0].x_mm => {
+                Some((b, (c - a) / (w[2].x_mm - w[0].x_mm)))
+            }
+            _ => None,
+        })
+        .collect();
+    let stiffness = Panel {
+        title: "Stiffness against force".into(),
+        x_label: "force F (N)".into(),
+        y_label: "stiffness dF/dx (N/mm)".into(),
+        series: vec![
+            Series {
+                label: format!(
+                    "designed: {:.4}/mm x (F - {:.3} N)",
+                    law.k2_per_mm, law.f0_n
+                ),
+                points: pts(&|f| Some((f.design_n, f.stiffness_n_per_mm))),
+                color: "#000",
+                dashed: false,
+            },
+            Series {
+                label: "predicted loading".into(),
+                points: loading_stiffness,
+                color: "#c62828",
+                dashed: true,
+            },
+        ],
+        ..Panel::default()
+    };
+    plot::document(&[force, stiffness], 560.0, 420.0).to_string()
+}
+
+/// `profile.svg`: pitch curve, cam surface and the roller at a few positions, to scale.
+pub fn profile_svg(design: &Design) -> String {
+    let samples = &design.pitch_curve.samples;
+    let r = design.spec.follower.roller_radius_mm;
+    let circles = (0..=4)
+        .map(|i| {
+            let idx = (samples.len() - 1) * i / 4;
+            (samples[idx].x_mm, samples[idx].y_mm, r)
+        })
+        .filter(|c| c.2 > 0.0)
+        .collect();
+    let panel = Panel {
+        title: format!(
+            "Cam profile of '{}' (roller radius {} mm)",
+            design.spec.name, r
+        ),
+        x_label: "cam x (mm)".into(),
+        y_label: "follower lift y (mm)".into(),
+        series: vec![
+            Series {
+                label: "pitch curve (roller centre)".into(),
+                points: samples.iter().map(|s| (s.x_mm, s.y_mm)).collect(),
+                color: "#1565c0",
+                dashed: true,
+            },
+            Series {
+                label: "cam surface".into(),
+                points: design
+                    .cam_surface
+                    .points
+                    .iter()
+                    .map(|p| (p.x_mm, p.y_mm))
+                    .collect(),
+                color: "#000",
+                dashed: false,
+            },
+        ],
+        circles,
+        equal_aspect: true,
+    };
+    plot::document(&[panel], 760.0, 560.0).to_string()
+}
+
+/// Names of the files [`write_design`] writes.
+pub const DESIGN_OUTPUTS: [&str; 4] = ["design.json", "profile.csv", "force.svg", "profile.svg"];
+
+/// Writes all design outputs into `dir` and returns the summary and the paths written.
+pub fn write_design(design: &Design, dir: &Path) -> Result<(DesignSummary, Vec<PathBuf>)> {
+    let summary = summarize(design, &DESIGN_OUTPUTS);
+    let json = serde_json::to_vec_pretty(&summary).map_err(|e| Error::Encode {
+        what: "design.json",
+        message: e.to_string(),
+    })?;
+    let files: [(&str, Vec<u8>); 4] = [
+        ("profile.csv", profile_csv(design)?),
+        ("force.svg", force_svg(design).into_bytes()),
+        ("profile.svg", profile_svg(design).into_bytes()),
+        ("design.json", json),
+    ];
+    let mut written = Vec::new();
+    for (name, bytes) in files {
+        let path = dir.join(name);
+        write_atomic(&path, &bytes)?;
+        written.push(path);
+    }
+    Ok((summary, written))
+}

@@ -1,0 +1,273 @@
+//! Physical quantities with units, as they appear in a spec.
+//!
+//! A quantity in a spec is either a bare number, read in the dimension's default unit
+//! (mm, N, N/mm, 1/mm, deg, MPa), or a string such as `"0.8 in"` or `"45 lbf"`. This module
+//! knows the accepted units of each dimension and converts to the default unit. It knows
+//! nothing about TOML or keys; [`crate::spec`] adds the key and line to any error.
+
+use std::fmt;
+
+/// The physical dimension of a spec quantity, which fixes its default unit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Dimension {
+    /// Length; default mm.
+    Length,
+    /// Force; default N.
+    Force,
+    /// Force per length (spring rate); default N/mm.
+    Stiffness,
+    /// Inverse length (the exponent rate k2); default 1/mm.
+    InverseLength,
+    /// Plane angle; default deg.
+    Angle,
+    /// Stress or elastic modulus; default MPa (= N/mm²).
+    Stress,
+    /// A pure number (ratios, coefficients).
+    Dimensionless,
+}
+
+const LBF_N: f64 = 4.448_221_615_260_5;
+const IN_MM: f64 = 25.4;
+
+impl Dimension {
+    /// The unit a bare number is read in.
+    pub fn default_unit(self) -> &'static str {
+        match self {
+            Dimension::Length => "mm",
+            Dimension::Force => "N",
+            Dimension::Stiffness => "N/mm",
+            Dimension::InverseLength => "1/mm",
+            Dimension::Angle => "deg",
+            Dimension::Stress => "MPa",
+            Dimension::Dimensionless => "",
+        }
+    }
+
+    /// A human name for error messages ("a length such as \"20 mm\"").
+    pub fn describe(self) -> &'static str {
+        match self {
+            Dimension::Length => "a length such as \"20 mm\"",
+            Dimension::Force => "a force such as \"200 N\"",
+            Dimension::Stiffness => "a spring rate such as \"5 N/mm\"",
+            Dimension::InverseLength => "an inverse length such as \"0.26 /mm\"",
+            Dimension::Angle => "an angle such as \"60 deg\"",
+            Dimension::Stress => "a stress such as \"460 MPa\"",
+            Dimension::Dimensionless => "a plain number",
+        }
+    }
+
+    /// Accepted unit spellings and their factor to the default unit.
+    pub fn units(self) -> &'static [(&'static str, f64)] {
+        match self {
+            Dimension::Length => &[
+                ("mm", 1.0),
+                ("m", 1000.0),
+                ("cm", 10.0),
+                ("um", 1e-3),
+                ("µm", 1e-3),
+                ("in", IN_MM),
+                ("inch", IN_MM),
+                ("ft", 12.0 * IN_MM),
+            ],
+            Dimension::Force => &[
+                ("N", 1.0),
+                ("kN", 1000.0),
+                ("mN", 1e-3),
+                ("lbf", LBF_N),
+                ("kgf", 9.806_65),
+                ("ozf", LBF_N / 16.0),
+            ],
+            Dimension::Stiffness => &[
+                ("N/mm", 1.0),
+                ("N/m", 1e-3),
+                ("N/cm", 0.1),
+                ("kN/m", 1.0),
+                ("kN/mm", 1000.0),
+                ("lbf/in", LBF_N / IN_MM),
+            ],
+            Dimension::InverseLength => &[
+                ("1/mm", 1.0),
+                ("/mm", 1.0),
+                ("1/m", 1e-3),
+                ("/m", 1e-3),
+                ("1/cm", 0.1),
+                ("/cm", 0.1),
+                ("1/in", 1.0 / IN_MM),
+                ("/in", 1.0 / IN_MM),
+            ],
+            Dimension::Angle => &[
+                ("deg", 1.0),
+                ("°", 1.0),
+                ("rad", 180.0 / std::f64::consts::PI),
+            ],
+            Dimension::Stress => &[
+                ("MPa", 1.0),
+                ("N/mm2", 1.0),
+                ("N/mm^2", 1.0),
+                ("N/mm²", 1.0),
+                ("GPa", 1000.0),
+                ("kPa", 1e-3),
+                ("Pa", 1e-6),
+                ("psi", LBF_N / (IN_MM * IN_MM)),
+                ("ksi", 1000.0 * LBF_N / (IN_MM * IN_MM)),
+            ],
+            Dimension::Dimensionless => &[],
+        }
+    }
+
+    /// The accepted unit spellings, comma separated, for error messages.
+    pub fn unit_list(self) -> String {
+        self.units()
+            .iter()
+            .map(|(u, _)| *u)
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+}
+
+/// Why a quantity string could not be read.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum UnitError {
+    /// Produced by [`parse_quantity`] when the text does not start with a number.
+    #[error("no number at the start")]
+    NoNumber,
+    /// Produced by [`parse_quantity`] when the unit is not one of the dimension's units.
+    #[error("unknown unit \"{unit}\" for {dimension}")]
+    UnknownUnit {
+        /// The unit text found.
+        unit: String,
+        /// What was expected, e.g. "a length such as \"20 mm\"".
+        dimension: &'static str,
+    },
+    /// Produced by [`parse_quantity`] and [`check_finite`] for NaN or infinity.
+    #[error("the value is not a finite number")]
+    NotFinite,
+}
+
+/// Checks that a number is finite.
+pub fn check_finite(value: f64) -> Result<f64, UnitError> {
+    if value.is_finite() {
+        Ok(value)
+    } else {
+        Err(UnitError::NotFinite)
+    }
+}
+
+/// Parses `"<number> <unit>"` (the space is optional; a bare number means the default unit)
+/// and returns the value in the dimension's default unit.
+///
+/// ```
+/// use camspring::units::{parse_quantity, Dimension};
+/// assert_eq!(parse_quantity("0.5 in", Dimension::Length).unwrap(), 12.7);
+/// assert!(parse_quantity("5 N", Dimension::Length).is_err());
+/// ```
+pub fn parse_quantity(text: &str, dimension: Dimension) -> Result<f64, UnitError> {
+    let text = text.trim();
+    let split = number_prefix_len(text);
+    if split == 0 {
+        return Err(UnitError::NoNumber);
+    }
+    let (number, unit) = text.split_at(split);
+    let value: f64 = number.parse().map_err(|_| UnitError::NoNumber)?;
+    let value = check_finite(value)?;
+    let unit = unit.trim();
+    if unit.is_empty() {
+        return Ok(value);
+    }
+    dimension
+        .units()
+        .iter()
+        .find(|(name, _)| *name == unit)
+        .map(|(_, factor)| value * factor)
+        .ok_or_else(|| UnitError::UnknownUnit {
+            unit: unit.to_string(),
+            dimension: dimension.describe(),
+        })
+}
+
+/// Length of the longest prefix of `text` that parses as a float.
+fn number_prefix_len(text: &str) -> usize {
+    let mut best = 0;
+    for (i, c) in text.char_indices() {
+        if !(c.is_ascii_digit() || matches!(c, '.' | '+' | '-' | 'e' | 'E')) {
+            break;
+        }
+        let end = i + c.len_utf8();
+        if text[..end].parse::<f64>().is_ok() {
+            best = end;
+        }
+    }
+    best
+}
+
+/// A value with its default-unit name, for display ("5 N/mm").
+#[derive(Debug, Clone, Copy)]
+pub struct Shown(pub f64, pub Dimension);
+
+impl fmt::Display for Shown {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let unit = self.1.default_unit();
+        if unit.is_empty() {
+            write!(f, "{}", self.0)
+        } else {
+            write!(f, "{} {}", self.0, unit)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn converts_to_default_units() {
+        assert_eq!(parse_quantity("20 mm", Dimension::Length).unwrap(), 20.0);
+        assert_eq!(parse_quantity("20", Dimension::Length).unwrap(), 20.0);
+        assert_eq!(
+            parse_quantity("0.8in", Dimension::Length).unwrap(),
+            0.8 * 25.4
+        );
+        assert!((parse_quantity("45 lbf", Dimension::Force).unwrap() - 200.169_97).abs() < 1e-4);
+        assert!(
+            (parse_quantity("1 lbf/in", Dimension::Stiffness).unwrap() - 0.175_126_8).abs() < 1e-6
+        );
+        assert_eq!(
+            parse_quantity("5000 N/m", Dimension::Stiffness).unwrap(),
+            5.0
+        );
+        assert_eq!(
+            parse_quantity("0.5 /mm", Dimension::InverseLength).unwrap(),
+            0.5
+        );
+        assert!((parse_quantity("1 rad", Dimension::Angle).unwrap() - 57.295_779_513).abs() < 1e-8);
+        assert_eq!(
+            parse_quantity("69 GPa", Dimension::Stress).unwrap(),
+            69_000.0
+        );
+        assert_eq!(parse_quantity("-1.5e1 N", Dimension::Force).unwrap(), -15.0);
+    }
+
+    #[test]
+    fn rejects_wrong_units_and_garbage() {
+        assert!(matches!(
+            parse_quantity("5 N", Dimension::Length),
+            Err(UnitError::UnknownUnit { .. })
+        ));
+        assert_eq!(
+            parse_quantity("mm", Dimension::Length),
+            Err(UnitError::NoNumber)
+        );
+        assert_eq!(
+            parse_quantity("", Dimension::Length),
+            Err(UnitError::NoNumber)
+        );
+        assert_eq!(
+            parse_quantity("inf mm", Dimension::Length),
+            Err(UnitError::NoNumber)
+        );
+        assert_eq!(
+            parse_quantity("1e999 mm", Dimension::Length),
+            Err(UnitError::NotFinite)
+        );
+    }
+}
