@@ -509,8 +509,8 @@ impl Spec {
     /// ```
     /// let spec = camspring::spec::Spec::from_toml(camspring::spec::DEFAULT_SPEC_TOML).unwrap();
     /// assert_eq!(spec.name, "paper");
-    /// let err = camspring::spec::Spec::from_toml("[law]\nfmax = \"200 mm\"\n").unwrap_err();
-    /// assert!(err.to_string().contains("law.fmax"));
+    /// let err = camspring::spec::Spec::from_toml("[law]\nxmax = \"20 N\"\n").unwrap_err();
+    /// assert!(err.to_string().contains("law.xmax"));
     /// ```
     pub fn from_toml(source: &str) -> Result<Spec, SpecError> {
         let raw: RawSpec = toml::from_str(source).map_err(|e| SpecError::Toml(e.to_string()))?;

@@ -57,6 +57,43 @@ pub struct Check {
     pub message: String,
     /// What to change, with numbers (for warn and fail).
     pub advice: Option<String>,
+    /// The same advice as spec changes a script can apply; any one of them is enough.
+    pub suggestions: Vec<Suggestion>,
+}
+
+/// One spec change that makes a check pass.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Suggestion {
+    /// Spec key, e.g. `follower.preload`.
+    pub key: &'static str,
+    /// The value to set, in `unit`.
+    pub value: f64,
+    /// Unit of the value.
+    pub unit: &'static str,
+}
+
+/// Advice text with its suggestions.
+#[derive(Debug, Clone, PartialEq)]
+struct Advice {
+    text: String,
+    suggestions: Vec<Suggestion>,
+}
+
+impl Advice {
+    fn text(text: impl Into<String>) -> Advice {
+        Advice {
+            text: text.into(),
+            suggestions: Vec::new(),
+        }
+    }
+}
+
+/// Splits optional advice into the two fields of a [`Check`].
+fn advice_fields(advice: Option<Advice>) -> (Option<String>, Vec<Suggestion>) {
+    match advice {
+        Some(a) => (Some(a.text), a.suggestions),
+        None => (None, Vec::new()),
+    }
 }
 
 /// Everything the checks need.
@@ -149,6 +186,42 @@ fn threshold(lo: f64, hi: f64, mut g: impl FnMut(f64) -> f64) -> Option<f64> {
     .ok()
 }
 
+/// The first p >= `start` (stepping through the increasing `candidates`) where g(p) <= 0,
+/// refined by Brent's method. None when g is not positive at `start`, a candidate cannot be
+/// evaluated (NaN: no curve there) before a sign change, or the candidates run out.
+fn first_crossing(
+    start: f64,
+    candidates: impl IntoIterator<Item = f64>,
+    mut g: impl FnMut(f64) -> f64,
+) -> Option<f64> {
+    let g0 = g(start);
+    if g0.is_nan() || g0 <= 0.0 {
+        return None;
+    }
+    let mut lo = start;
+    for p in candidates {
+        let v = g(p);
+        if v.is_nan() {
+            return None;
+        }
+        if v <= 0.0 {
+            return threshold(lo, p, g);
+        }
+        lo = p;
+    }
+    None
+}
+
+/// Spring rates from `ks0` up by factors of 1.5 (to about 10^7 times).
+fn rate_candidates(ks0: f64) -> impl Iterator<Item = f64> {
+    (1..40).map(move |k| ks0 * 1.5_f64.powi(k))
+}
+
+/// Preloads from `yp0` up in doubling steps starting at 1 % of the stroke.
+fn preload_candidates(yp0: f64, xmax: f64) -> impl Iterator<Item = f64> {
+    (0..24).map(move |k| yp0 + 0.01 * xmax * 2_f64.powi(k))
+}
+
 fn round_up(v: f64) -> f64 {
     let scale = 10f64.powi(3 - v.abs().log10().ceil() as i32);
     (v * ADVICE_MARGIN * scale).ceil() / scale
@@ -160,34 +233,47 @@ fn round_down(v: f64) -> f64 {
 }
 
 /// Advice to bring the largest pressure angle to at most `target_deg`, by spring rate or preload.
-fn angle_advice(input: &CheckInput<'_>, target_deg: f64) -> String {
+fn angle_advice(input: &CheckInput<'_>, target_deg: f64) -> Advice {
     let f = input.follower;
     let ks0 = f.spring_rate_n_per_mm;
-    let by_rate = threshold(ks0.ln(), (ks0 * 1e4).ln(), |lk| {
-        metrics(input, &f.with_spring_rate(lk.exp()))
-            .map_or(f64::NAN, |m| m.max_theta_deg - target_deg)
-    })
-    .map(f64::exp);
+    let by_rate = first_crossing(ks0, rate_candidates(ks0), |ks| {
+        metrics(input, &f.with_spring_rate(ks)).map_or(f64::NAN, |m| m.max_theta_deg - target_deg)
+    });
     let yp0 = f.preload_mm;
-    let yp_hi = yp0 + 20.0 * input.xmax_mm + 100.0;
-    let by_preload = threshold(yp0, yp_hi, |yp| {
+    let by_preload = first_crossing(yp0, preload_candidates(yp0, input.xmax_mm), |yp| {
         metrics(input, &f.with_preload(yp)).map_or(f64::NAN, |m| m.max_theta_deg - target_deg)
     });
     let keep = format!("to keep the pressure angle at or below {target_deg:.2} deg");
-    match (by_rate, by_preload) {
+    let by_rate = by_rate.map(round_up);
+    let by_preload = by_preload.map(round_up);
+    let text = match (by_rate, by_preload) {
         (Some(ks), Some(yp)) => format!(
-            "Raise follower.spring_rate from {ks0} to at least {} N/mm, or follower.preload from {yp0} to at least {} mm, {keep}.",
-            round_up(ks),
-            round_up(yp)
+            "Raise follower.spring_rate from {ks0} to at least {ks} N/mm, or follower.preload from {yp0} to at least {yp} mm, {keep}."
         ),
-        (Some(ks), None) => format!("Raise follower.spring_rate from {ks0} to at least {} N/mm {keep}.", round_up(ks)),
+        (Some(ks), None) => format!("Raise follower.spring_rate from {ks0} to at least {ks} N/mm {keep}."),
         (None, Some(yp)) => format!(
-            "Raise follower.preload from {yp0} to at least {} mm {keep}; no spring rate alone can, because \
-             the angle near x = 0 is set by the preload.",
-            round_up(yp)
+            "Raise follower.preload from {yp0} to at least {yp} mm {keep}; no spring rate alone can, because \
+             the angle near x = 0 is set by the preload."
         ),
-        (None, None) => format!("Neither spring rate nor preload alone can {keep}; lower the force law's fmax or raise xmax."),
+        (None, None) => format!("Neither a stiffer spring nor more preload alone can keep the pressure angle at or below {target_deg:.2} deg \
+             (the curve cannot be made with so much spring force against friction); lower fmax, raise xmax or reduce friction."),
+    };
+    let mut suggestions = Vec::new();
+    if let Some(ks) = by_rate {
+        suggestions.push(Suggestion {
+            key: "follower.spring_rate",
+            value: ks,
+            unit: "N/mm",
+        });
     }
+    if let Some(yp) = by_preload {
+        suggestions.push(Suggestion {
+            key: "follower.preload",
+            value: yp,
+            unit: "mm",
+        });
+    }
+    Advice { text, suggestions }
 }
 
 fn capitalise(mut s: String) -> String {
@@ -208,6 +294,8 @@ fn pressure_angle(input: &CheckInput<'_>) -> Check {
     } else {
         Status::Pass
     };
+    let (advice, suggestions) =
+        advice_fields((status == Status::Fail).then(|| angle_advice(input, limit)));
     Check {
         name: "pressure_angle",
         status,
@@ -218,7 +306,8 @@ fn pressure_angle(input: &CheckInput<'_>) -> Check {
         message: format!(
             "largest pressure angle {theta:.2} deg at x = {at:.3} mm (limit {limit} deg)"
         ),
-        advice: (status == Status::Fail).then(|| angle_advice(input, limit)),
+        advice,
+        suggestions,
     }
 }
 
@@ -238,8 +327,7 @@ fn self_locking(input: &CheckInput<'_>) -> Check {
     // with a warning when the return is weak (below the margin).
     let load_fails = load_margin < limit;
     let unload_fails = unload_margin <= 0.0;
-    let loading_worse =
-        load_fails || (!unload_fails && load_margin - limit <= unload_margin - limit);
+    let loading_worse = load_fails || (!unload_fails && load_margin <= unload_margin);
     let (value, at) = if loading_worse {
         (load_margin, at_max)
     } else {
@@ -252,17 +340,11 @@ fn self_locking(input: &CheckInput<'_>) -> Check {
     } else {
         Status::Pass
     };
-    let message = if loading_worse {
-        format!(
-            "loading margin to jamming 90 - (theta + phi) = {load_margin:.2} deg at x = {at_max:.3} mm \
-             (phi = {phi:.2} deg); unloading margin theta - phi = {unload_margin:.2} deg"
-        )
-    } else {
-        format!(
-            "unloading margin theta - phi = {unload_margin:.2} deg at x = {at_min:.3} mm (phi = {phi:.2} deg): \
-             below zero the spring cannot push the rod back; loading margin {load_margin:.2} deg"
-        )
-    };
+    let message = format!(
+        "loading margin to jamming 90 - (theta + phi) = {load_margin:.2} deg at x = {at_max:.3} mm; \
+         unloading return margin theta - phi = {unload_margin:.2} deg at x = {at_min:.3} mm \
+         (phi = {phi:.2} deg; below 0 the spring cannot push the rod back)"
+    );
     let advice = (status != Status::Pass).then(|| {
         if loading_worse {
             angle_advice(input, 90.0 - phi - limit)
@@ -274,17 +356,20 @@ fn self_locking(input: &CheckInput<'_>) -> Check {
             let largest = threshold(f.preload_mm, 0.0, |yp| {
                 metrics(input, &f.with_preload(yp)).map_or(f64::NAN, |m| target - m.min_theta_deg)
             });
-            match largest {
-                Some(yp) => format!(
-                    "Lower follower.preload from {} to at most {} mm, or reduce friction, so that the \
-                     spring returns the rod with theta - phi >= {limit} deg.",
-                    f.preload_mm,
-                    round_down(yp)
-                ),
-                None => "Reduce friction: the pressure angle near the start is too small to overcome it.".into(),
+            match largest.map(round_down) {
+                Some(yp) => Advice {
+                    text: format!(
+                        "Lower follower.preload from {} to at most {yp} mm, or reduce friction, so that the \
+                         spring returns the rod with theta - phi >= {limit} deg.",
+                        f.preload_mm
+                    ),
+                    suggestions: vec![Suggestion { key: "follower.preload", value: yp, unit: "mm" }],
+                },
+                None => Advice::text("Reduce friction: the pressure angle near the start is too small to overcome it."),
             }
         }
     });
+    let (advice, suggestions) = advice_fields(advice);
     Check {
         name: "self_locking",
         status,
@@ -294,6 +379,7 @@ fn self_locking(input: &CheckInput<'_>) -> Check {
         at_x_mm: Some(at),
         message,
         advice,
+        suggestions,
     }
 }
 
@@ -328,24 +414,28 @@ fn undercut(input: &CheckInput<'_>) -> Check {
     let advice = (status != Status::Pass).then(|| {
         let f = input.follower;
         let wanted = UNDERCUT_WARN_RATIO * r;
-        let yp_hi = f.preload_mm + 20.0 * input.xmax_mm + 100.0;
-        let by_preload = threshold(f.preload_mm, yp_hi, |yp| {
+        let by_preload = first_crossing(f.preload_mm, preload_candidates(f.preload_mm, input.xmax_mm), |yp| {
             metrics(input, &f.with_preload(yp)).map_or(f64::NAN, |m| wanted - m.min_material_radius_mm)
-        });
+        })
+        .map(round_up);
+        let by_roller = rho.map(|(rho, _)| round_down(rho / UNDERCUT_WARN_RATIO));
         let mut parts = Vec::new();
+        let mut suggestions = Vec::new();
         if let Some(yp) = by_preload {
             parts.push(format!(
-                "raise follower.preload from {} to at least {} mm (the smallest preload that removes the undercut with {:.0} % margin)",
+                "raise follower.preload from {} to at least {yp} mm (the smallest preload that removes the undercut with {:.0} % margin)",
                 f.preload_mm,
-                round_up(yp),
                 (UNDERCUT_WARN_RATIO - 1.0) * 100.0
             ));
+            suggestions.push(Suggestion { key: "follower.preload", value: yp, unit: "mm" });
         }
-        if let Some((rho, _)) = rho {
-            parts.push(format!("use a roller radius of at most {} mm", round_down(rho / UNDERCUT_WARN_RATIO)));
+        if let Some(rr) = by_roller {
+            parts.push(format!("use a roller radius of at most {rr} mm"));
+            suggestions.push(Suggestion { key: "follower.roller_radius", value: rr, unit: "mm" });
         }
-        capitalise(parts.join(", or ")) + "."
+        Advice { text: capitalise(parts.join(", or ")) + ".", suggestions }
     });
+    let (advice, suggestions) = advice_fields(advice);
     Check {
         name: "undercut",
         status,
@@ -355,6 +445,7 @@ fn undercut(input: &CheckInput<'_>) -> Check {
         at_x_mm: rho.map(|r| r.1),
         message,
         advice,
+        suggestions,
     }
 }
 
@@ -372,6 +463,16 @@ fn cutter_fit(input: &CheckInput<'_>) -> Check {
             2.0 * rad
         ),
     };
+    let advice = (status == Status::Fail).then(|| {
+        let d = round_down(2.0 * concave.map_or(0.0, |c| c.0));
+        Advice {
+            text: format!(
+                "Use an end mill of at most {d} mm diameter, or a larger roller (the concave radius is the pitch radius plus the roller radius)."
+            ),
+            suggestions: vec![Suggestion { key: "machining.tool_diameter", value: d, unit: "mm" }],
+        }
+    });
+    let (advice, suggestions) = advice_fields(advice);
     Check {
         name: "cutter_fit",
         status,
@@ -380,12 +481,8 @@ fn cutter_fit(input: &CheckInput<'_>) -> Check {
         unit: "mm",
         at_x_mm: concave.map(|c| c.1),
         message,
-        advice: (status == Status::Fail).then(|| {
-            format!(
-                "Use an end mill of at most {} mm diameter, or a larger roller (the concave radius is the pitch radius plus the roller radius).",
-                round_down(2.0 * concave.map_or(0.0, |c| c.0))
-            )
-        }),
+        advice,
+        suggestions,
     }
 }
 
@@ -413,6 +510,7 @@ fn contact_stress(input: &CheckInput<'_>) -> Check {
                 at.x_mm
             ),
             advice: Some("Use a roller (roller_radius > 0) and clear the undercut and self-locking checks first.".into()),
+            suggestions: Vec::new(),
         };
     }
     let (p, at) = worst.unwrap_or((0.0, 0.0));
@@ -423,6 +521,17 @@ fn contact_stress(input: &CheckInput<'_>) -> Check {
     } else {
         Status::Pass
     };
+    let advice = (status != Status::Pass).then(|| {
+        // p ~ 1/sqrt(contact length): the thickness that brings p to 0.8 * limit.
+        let b = round_up(input.thickness_mm * (p / (0.8 * limit)).powi(2));
+        Advice {
+            text: format!(
+                "Make part.thickness at least {b} mm (p scales with 1/sqrt(thickness)), use a larger roller, or a stronger cam material."
+            ),
+            suggestions: vec![Suggestion { key: "part.thickness", value: b, unit: "mm" }],
+        }
+    });
+    let (advice, suggestions) = advice_fields(advice);
     Check {
         name: "contact_stress",
         status,
@@ -430,14 +539,10 @@ fn contact_stress(input: &CheckInput<'_>) -> Check {
         limit,
         unit: "MPa",
         at_x_mm: Some(at),
-        message: format!("peak Hertz line-contact pressure {p:.1} MPa at x = {at:.3} mm (limit {limit:.1} MPa)"),
-        advice: (status != Status::Pass).then(|| {
-            // p ~ 1/sqrt(thickness): the thickness that brings p to 0.8 * limit.
-            let b = input.thickness_mm * (p / (0.8 * limit)).powi(2);
-            format!(
-                "Make part.thickness at least {} mm (p scales with 1/sqrt(thickness)), use a larger roller, or a stronger cam material.",
-                round_up(b)
-            )
-        }),
+        message: format!(
+            "peak Hertz line-contact pressure {p:.1} MPa at x = {at:.3} mm (limit {limit:.1} MPa)"
+        ),
+        advice,
+        suggestions,
     }
 }

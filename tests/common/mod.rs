@@ -1,0 +1,76 @@
+//! Shared helpers for the integration tests: the paper's law, follower builders, tolerances.
+#![allow(dead_code)]
+
+use camspring::cam::follower::{Follower, FrictionCorrection, FrictionSource, SpringArrangement};
+use camspring::cam::pitch_curve::SynthesisOptions;
+use camspring::law::{solve, ExpLaw, LawTargets};
+
+/// The paper's targets (physics.md section 1).
+pub fn paper_targets() -> LawTargets {
+    LawTargets {
+        fmax_n: 200.0,
+        fmin_n: 5.0,
+        xmax_mm: 20.0,
+        l0_mm: 5.0,
+        c0: 0.2,
+        delta0_mm: 1.0,
+    }
+}
+
+/// The paper's law, solved exactly.
+pub fn paper_law() -> ExpLaw {
+    solve(&paper_targets()).unwrap().law
+}
+
+/// A follower arrangement.
+pub fn follower(
+    count: u8,
+    ks: f64,
+    preload: f64,
+    roller: f64,
+    mu: f64,
+    corr: FrictionCorrection,
+) -> Follower {
+    Follower {
+        count,
+        arrangement: SpringArrangement::PerFollower,
+        spring_rate_n_per_mm: ks,
+        preload_mm: preload,
+        roller_radius_mm: roller,
+        friction: FrictionSource::Coefficient { coefficient: mu },
+        friction_correction: corr,
+    }
+}
+
+/// Fine sampling for accuracy tests.
+pub fn fine() -> SynthesisOptions {
+    SynthesisOptions {
+        chord_tolerance_mm: 1e-4,
+        max_step_mm: 0.05,
+    }
+}
+
+/// |a - b| <= tol, with a message.
+#[track_caller]
+pub fn assert_near(a: f64, b: f64, tol: f64, what: &str) {
+    assert!(
+        (a - b).abs() <= tol,
+        "{what}: {a} vs {b} (difference {:e}, tolerance {tol:e})",
+        (a - b).abs()
+    );
+}
+
+/// Classic fixed-step RK4 for dY/dx = f(x, Y): an independent integrator for the tests.
+pub fn rk4(f: impl Fn(f64, f64) -> f64, x0: f64, y0: f64, x1: f64, steps: usize) -> f64 {
+    let h = (x1 - x0) / steps as f64;
+    let (mut x, mut y) = (x0, y0);
+    for _ in 0..steps {
+        let k1 = f(x, y);
+        let k2 = f(x + h / 2.0, y + h / 2.0 * k1);
+        let k3 = f(x + h / 2.0, y + h / 2.0 * k2);
+        let k4 = f(x + h, y + h * k3);
+        y += h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4);
+        x += h;
+    }
+    y
+}

@@ -1,0 +1,179 @@
+//! Property tests: every accepted spec gives valid geometry or a clear error, never a panic.
+
+use camspring::cam::checks::Status;
+use camspring::cam::follower::FrictionCorrection;
+use camspring::design::design;
+use camspring::spec::Spec;
+use camspring::units::{parse_quantity, Dimension};
+use proptest::prelude::*;
+
+#[derive(Debug, Clone)]
+struct SpecParams {
+    fmin: f64,
+    force_ratio: f64,
+    l0: f64,
+    length_ratio: f64,
+    c0: f64,
+    delta0: f64,
+    count: u8,
+    shared: bool,
+    spring_rate: f64,
+    preload: f64,
+    roller: f64,
+    friction: f64,
+    correction: &'static str,
+    thickness: f64,
+}
+
+fn spec_params() -> impl Strategy<Value = SpecParams> {
+    (
+        (
+            1.0..50.0f64,
+            2.0..100.0f64,
+            1.0..10.0f64,
+            1.5..6.0f64,
+            0.05..1.2f64,
+            0.1..2.0f64,
+        ),
+        (
+            1u8..=2,
+            any::<bool>(),
+            0.5..50.0f64,
+            0.0..10.0f64,
+            0.0..8.0f64,
+            0.0..0.3f64,
+        ),
+        (
+            prop::sample::select(vec!["loading", "unloading", "midline", "none"]),
+            2.0..30.0f64,
+        ),
+    )
+        .prop_map(
+            |((fmin, fr, l0, lr, sr, delta0), (count, shared, ks, yp, r, mu), (corr, b))| {
+                SpecParams {
+                    fmin,
+                    force_ratio: fr,
+                    l0,
+                    length_ratio: lr,
+                    // Sr = c0*l0/delta0 < 1 keeps F(0) > 0; up to 1.2 also exercises that refusal.
+                    c0: sr * delta0 / l0,
+                    delta0,
+                    count,
+                    shared: shared && count == 2,
+                    spring_rate: ks,
+                    preload: yp,
+                    roller: r,
+                    friction: mu,
+                    correction: corr,
+                    thickness: b,
+                }
+            },
+        )
+}
+
+fn toml_of(p: &SpecParams) -> String {
+    format!(
+        "name = \"prop\"\n[law]\nfmax = {}\nfmin = {}\nxmax = {}\nl0 = {}\nc0 = {}\ndelta0 = {}\n\
+         [follower]\ncount = {}\nspring = \"{}\"\nspring_rate = {}\npreload = {}\nroller_radius = {}\n\
+         friction = {}\nfriction_correction = \"{}\"\n[part]\nthickness = {}\n",
+        p.fmin * p.force_ratio,
+        p.fmin,
+        p.l0 * p.length_ratio,
+        p.l0,
+        p.c0,
+        p.delta0,
+        p.count,
+        if p.shared { "shared" } else { "per-follower" },
+        p.spring_rate,
+        p.preload,
+        p.roller,
+        p.friction,
+        p.correction,
+        p.thickness
+    )
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 96, ..ProptestConfig::default() })]
+
+    #[test]
+    fn accepted_specs_give_valid_geometry_or_a_clear_error(p in spec_params()) {
+        let spec = Spec::from_toml(&toml_of(&p)).expect("the generated spec is well-formed");
+        match design(&spec) {
+            Err(e) => {
+                let msg = e.to_string();
+                prop_assert!(msg.len() > 30, "{msg}");
+                prop_assert!(msg.contains("softening") || msg.contains("friction") || msg.contains("correction")
+                    || msg.contains("F(0)"), "unexpected error: {msg}");
+            }
+            Ok(d) => {
+                let xmax = spec.law.xmax_mm();
+                let s = &d.pitch_curve.samples;
+                prop_assert_eq!(s[0].x_mm, 0.0);
+                prop_assert_eq!(s[0].y_mm, 0.0);
+                prop_assert_eq!(s.last().unwrap().x_mm, xmax);
+                for w in s.windows(2) {
+                    prop_assert!(w[1].x_mm > w[0].x_mm, "x increases");
+                    prop_assert!(w[1].y_mm >= w[0].y_mm, "the pitch curve is monotone");
+                }
+                for q in s {
+                    prop_assert!(q.theta_rad >= 0.0 && q.theta_rad <= std::f64::consts::FRAC_PI_2 + 1e-12);
+                }
+                for pt in &d.cam_surface.points {
+                    prop_assert!(pt.x_mm.is_finite() && pt.y_mm.is_finite());
+                }
+                if let Some(r) = d.law.residuals {
+                    prop_assert!(r.max_abs() < 1e-9, "{r:?}");
+                }
+                // The corrected stroke reproduces the law from the geometry.
+                let phi = spec.follower.friction_angle_rad();
+                for (q, f) in s.iter().zip(&d.forces) {
+                    if q.x_mm == 0.0 && spec.follower.preload_mm == 0.0 {
+                        continue; // 0 * inf at the singular start
+                    }
+                    let predicted = match (spec.follower.friction_correction, phi == 0.0) {
+                        (_, true) | (FrictionCorrection::Loading, _) => f.loading_n,
+                        (FrictionCorrection::Unloading, _) => Some(f.unloading_n),
+                        (FrictionCorrection::Midline, _) => f.loading_n.map(|l| 0.5 * (l + f.unloading_n)),
+                        (FrictionCorrection::None, false) => None,
+                    };
+                    if let Some(pred) = predicted {
+                        prop_assert!(((pred - f.design_n) / f.design_n).abs() < 1e-6,
+                            "x = {}: predicted {pred} vs law {}", q.x_mm, f.design_n);
+                    }
+                }
+                prop_assert_eq!(d.checks.len(), 5);
+                for c in &d.checks {
+                    if c.status == Status::Fail {
+                        prop_assert!(c.advice.is_some(), "{:?}", c);
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn any_text_as_a_spec_is_an_error_or_a_spec_never_a_panic(text in "\\PC{0,400}") {
+        let _ = Spec::from_toml(&text);
+    }
+
+    #[test]
+    fn mutated_specs_never_panic(cut in 0usize..900, insert in "[\\[\\]=\" a-z0-9.#\\n-]{0,12}") {
+        let base = include_str!("../specs/paper.toml");
+        let cut = cut.min(base.len());
+        let cut = (0..=cut).rev().find(|&i| base.is_char_boundary(i)).unwrap();
+        let text = format!("{}{}{}", &base[..cut], insert, &base[cut..]);
+        if let Ok(spec) = Spec::from_toml(&text) {
+            let _ = design(&spec);
+        }
+    }
+
+    #[test]
+    fn quantity_parser_never_panics(text in "\\PC{0,30}") {
+        for d in [Dimension::Length, Dimension::Force, Dimension::Stiffness, Dimension::Angle, Dimension::Stress] {
+            if let Ok(v) = parse_quantity(&text, d) {
+                prop_assert!(v.is_finite());
+            }
+        }
+    }
+}
