@@ -1,1 +1,51 @@
-fn main() {}
+//! Criterion benchmarks of the design pipeline on the default spec (`specs/paper.toml`).
+//! Run with `cargo bench --bench design`; results go in docs/BENCHMARKS.md.
+
+use std::hint::black_box;
+
+use camspring::cam::pitch_curve::synthesize;
+use camspring::design::{design, law_of, synthesis_options};
+use camspring::export::{force_svg, profile_csv, profile_svg, summarize};
+use camspring::law::solve;
+use camspring::spec::{LawSpec, Spec, DEFAULT_SPEC_TOML};
+use criterion::{criterion_group, criterion_main, Criterion};
+
+fn benches(c: &mut Criterion) {
+    let spec = Spec::from_toml(DEFAULT_SPEC_TOML).unwrap();
+    let LawSpec::Targets(targets) = spec.law.clone() else {
+        unreachable!("the default spec has targets")
+    };
+    c.bench_function("spec_parse", |b| {
+        b.iter(|| Spec::from_toml(black_box(DEFAULT_SPEC_TOML)).unwrap())
+    });
+    c.bench_function("law_solve", |b| {
+        b.iter(|| solve(black_box(&targets)).unwrap())
+    });
+    let law = law_of(&spec).unwrap().law;
+    let options = synthesis_options(&spec);
+    c.bench_function("pitch_curve_synthesize", |b| {
+        b.iter(|| synthesize(black_box(&law), &spec.follower, 20.0, &options).unwrap())
+    });
+    c.bench_function("design_pipeline", |b| {
+        b.iter(|| design(black_box(&spec)).unwrap())
+    });
+    let d = design(&spec).unwrap();
+    c.bench_function("design_outputs_in_memory", |b| {
+        b.iter(|| {
+            let s = serde_json::to_vec_pretty(&summarize(&d, &[])).unwrap();
+            (s, profile_csv(&d).unwrap(), force_svg(&d), profile_svg(&d))
+        })
+    });
+    // A failing design: the advice searches re-synthesise the curve many times.
+    let literal = Spec::from_toml(include_str!("../specs/paper-literal.toml")).unwrap();
+    c.bench_function("design_pipeline_with_advice (paper-literal)", |b| {
+        b.iter(|| design(black_box(&literal)).unwrap())
+    });
+}
+
+criterion_group! {
+    name = group;
+    config = Criterion::default().sample_size(30).measurement_time(std::time::Duration::from_secs(3));
+    targets = benches
+}
+criterion_main!(group);

@@ -108,7 +108,7 @@ pub fn format_design(run: &DesignRun) -> String {
     let f = &s.follower;
     let _ = writeln!(
         o,
-        "  follower {} x roller r = {:.4} mm, springs {:.4} N/mm ({:?}), k_eff = {:.4} N/mm, preload {:.4} mm, friction {:.4} ({:?} correction)",
+        "  follower {} x roller r = {:.4} mm, springs {:.4} N/mm ({}), k_eff = {:.4} N/mm, preload {:.4} mm, friction {:.4} ({} correction)",
         f.count, f.roller_radius_mm, f.spring_rate_n_per_mm, f.spring, f.k_eff_n_per_mm, f.preload_mm, f.friction_coefficient, f.friction_correction
     );
     let p = &s.profile;

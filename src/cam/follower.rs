@@ -53,6 +53,26 @@ pub enum FrictionCorrection {
     None,
 }
 
+impl std::fmt::Display for SpringArrangement {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            SpringArrangement::PerFollower => "per-follower",
+            SpringArrangement::Shared => "shared",
+        })
+    }
+}
+
+impl std::fmt::Display for FrictionCorrection {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            FrictionCorrection::Loading => "loading",
+            FrictionCorrection::Unloading => "unloading",
+            FrictionCorrection::Midline => "midline",
+            FrictionCorrection::None => "none",
+        })
+    }
+}
+
 /// The follower arrangement.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Follower {

@@ -74,7 +74,7 @@ pub enum CamError {
         /// The target force there.
         force_n: f64,
         /// The correction in use.
-        correction: &'static str,
+        correction: String,
         /// What to change.
         advice: String,
     },
@@ -92,7 +92,7 @@ pub enum CamError {
         /// mu * F there.
         friction_n: f64,
         /// The correction in use.
-        correction: &'static str,
+        correction: String,
         /// What to change.
         advice: String,
     },
@@ -104,15 +104,6 @@ pub enum CamError {
         /// The integrator's message.
         message: String,
     },
-}
-
-fn correction_name(c: FrictionCorrection) -> &'static str {
-    match c {
-        FrictionCorrection::Loading => "loading",
-        FrictionCorrection::Unloading => "unloading",
-        FrictionCorrection::Midline => "midline",
-        FrictionCorrection::None => "none",
-    }
 }
 
 /// The direction field and its partial derivatives with respect to F and q.
@@ -239,7 +230,7 @@ impl PitchField {
         let force = self.law.force_n(x);
         let q = self.k_eff * (y + self.preload);
         let d = self.direction_at(x, y);
-        let name = correction_name(self.correction);
+        let name = self.correction.to_string();
         if d.b.is_nan() || d.b <= 0.0 {
             let yp_max = force / (self.mu * self.k_eff) - y;
             return Err(CamError::FrictionExceedsForce {
@@ -262,7 +253,7 @@ impl PitchField {
                 x_mm: x,
                 spring_n: q,
                 friction_n: self.mu * force,
-                correction: name,
+                correction: name.clone(),
                 advice: if x == 0.0 {
                     format!(
                         "Give follower.preload at least {:.4} mm, or use the `loading` or `midline` correction.",
