@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 
 use crate::design::DesignError;
+use crate::part::PartError;
 use crate::spec::SpecError;
 
 /// Any failure of a camspring command.
@@ -20,6 +21,10 @@ pub enum Error {
     /// Produced by [`crate::design::design`] (through the commands) when the spec cannot be realised.
     #[error(transparent)]
     Design(#[from] DesignError),
+    /// Produced by [`crate::export::write_design`] when the part cannot be built (a hole
+    /// that does not fit, or a fit that cannot reach its tolerance).
+    #[error("part: {0}")]
+    Part(#[from] PartError),
     /// Produced when an input file cannot be read.
     #[error("cannot read {path}: {source}")]
     Read {

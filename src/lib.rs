@@ -23,6 +23,7 @@ pub mod design;
 pub mod error;
 pub mod export;
 pub mod law;
+pub mod part;
 pub mod run;
 pub mod spec;
 pub mod units;

@@ -124,6 +124,26 @@ pub fn format_design(run: &DesignRun) -> String {
             .map_or("jammed".to_string(), |v| format!("{v:.3}")),
         p.unloading_force_at_xmax_n
     );
+    match (&s.part, &s.part_refused) {
+        (Some(part), _) => {
+            let _ = writeln!(
+                o,
+                "  part     area {:.4} mm2 x {:.3} mm = {:.3} mm3, box {:.3} x {:.3} mm, cam B-spline {} spans within {:.1e} mm, STL {} triangles",
+                part.area_mm2,
+                part.thickness_mm,
+                part.volume_mm3,
+                part.bounding_box_max_mm[0] - part.bounding_box_min_mm[0],
+                part.bounding_box_max_mm[1] - part.bounding_box_min_mm[1],
+                part.cam_edge_spans.iter().sum::<usize>(),
+                part.cam_edge_fit_deviation_mm,
+                part.stl_triangles
+            );
+        }
+        (None, Some(why)) => {
+            let _ = writeln!(o, "  part     REFUSED: {why}");
+        }
+        (None, None) => {}
+    }
     let _ = writeln!(o, "  checks");
     for c in &s.checks {
         let _ = writeln!(

@@ -119,6 +119,18 @@ impl Material {
     }
 }
 
+/// A through hole in the part (part coordinates: x along the stroke from the roller centre at
+/// x = 0, y = 0 on the part's centre line for two followers or at the cam surface's start for one).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Hole {
+    /// Centre x.
+    pub x_mm: f64,
+    /// Centre y.
+    pub y_mm: f64,
+    /// Diameter.
+    pub diameter_mm: f64,
+}
+
 /// The part that carries the cam surface(s).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct PartSpec {
@@ -130,6 +142,15 @@ pub struct PartSpec {
     pub cam_material: Material,
     /// Roller material.
     pub roller_material: Material,
+    /// Straight run before x = 0, tangent to the cam surface there.
+    pub lead_in_mm: f64,
+    /// Straight over-travel run after Xmax, tangent to the cam surface there.
+    pub run_out_mm: f64,
+    /// Material under the lowest point of the cam edge (one follower), or the width of the cam
+    /// between its two surfaces at their narrowest (two followers).
+    pub web_mm: f64,
+    /// Mounting holes.
+    pub holes: Vec<Hole>,
 }
 
 /// Machining settings known to the design core (the cutter decides what concave radius can be made).
@@ -157,6 +178,10 @@ pub struct ChecksSpec {
 pub struct OutputSpec {
     /// Largest chord error of the sampled pitch curve and cam surface polylines.
     pub chord_tolerance_mm: f64,
+    /// Largest deviation of the STEP/DXF B-spline cam edge from the exact cam surface.
+    pub fit_tolerance_mm: f64,
+    /// Largest chord error of the STL mesh from the exact part.
+    pub stl_tolerance_mm: f64,
 }
 
 /// A validated design spec in default units.
@@ -241,6 +266,18 @@ struct RawPart {
     roller_width: Q,
     cam_material: Option<RawMaterial>,
     roller_material: Option<RawMaterial>,
+    lead_in: Q,
+    run_out: Q,
+    web: Q,
+    holes: Option<Vec<RawHole>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawHole {
+    x: Q,
+    y: Q,
+    diameter: Q,
 }
 
 #[derive(Debug, Deserialize)]
@@ -261,6 +298,8 @@ struct RawChecks {
 #[serde(deny_unknown_fields)]
 struct RawOutput {
     chord_tolerance: Q,
+    fit_tolerance: Q,
+    stl_tolerance: Q,
 }
 
 /// Reads raw values with their key paths and line numbers.
@@ -749,6 +788,10 @@ impl Spec {
             roller_width: None,
             cam_material: None,
             roller_material: None,
+            lead_in: None,
+            run_out: None,
+            web: None,
+            holes: None,
         };
         let p = raw.part.as_ref().unwrap_or(&empty_part);
         let thickness = r
@@ -771,6 +814,34 @@ impl Spec {
                 &p.roller_material,
                 "bearing-steel",
             )?,
+            lead_in_mm: r
+                .optional("part.lead_in", &p.lead_in, D::Length, Range::NonNegative)?
+                .unwrap_or(2.0),
+            run_out_mm: r
+                .optional("part.run_out", &p.run_out, D::Length, Range::NonNegative)?
+                .unwrap_or(2.0),
+            web_mm: r
+                .optional("part.web", &p.web, D::Length, Range::Positive)?
+                .unwrap_or(8.0),
+            holes: p
+                .holes
+                .iter()
+                .flatten()
+                .enumerate()
+                .map(|(i, h)| {
+                    let key = |k: &str| format!("part.holes[{i}].{k}");
+                    Ok(Hole {
+                        x_mm: r.required(&key("x"), &h.x, D::Length, Range::Any)?,
+                        y_mm: r.required(&key("y"), &h.y, D::Length, Range::Any)?,
+                        diameter_mm: r.required(
+                            &key("diameter"),
+                            &h.diameter,
+                            D::Length,
+                            Range::Positive,
+                        )?,
+                    })
+                })
+                .collect::<Result<Vec<Hole>, SpecError>>()?,
         };
 
         let tool_diameter = match &raw.machining {
@@ -831,6 +902,33 @@ impl Spec {
             None => None,
         }
         .unwrap_or(1e-3);
+        let (fit_tolerance, stl_tolerance) = match &raw.output {
+            Some(o) => (
+                r.optional(
+                    "output.fit_tolerance",
+                    &o.fit_tolerance,
+                    D::Length,
+                    Range::Closed(1e-5, 0.1),
+                )?,
+                r.optional(
+                    "output.stl_tolerance",
+                    &o.stl_tolerance,
+                    D::Length,
+                    Range::Closed(1e-4, 1.0),
+                )?,
+            ),
+            None => (None, None),
+        };
+        let fit_tolerance = fit_tolerance.unwrap_or(1e-3);
+        let stl_tolerance = stl_tolerance.unwrap_or(5e-3);
+        if chord_tolerance >= stl_tolerance {
+            return Err(SpecError::Invalid {
+                key: "output.chord_tolerance".into(),
+                line: None,
+                found: format!("{chord_tolerance} mm with output.stl_tolerance = {stl_tolerance} mm"),
+                expected: "a chord tolerance smaller than the STL tolerance (the mesh is decimated from the samples)".into(),
+            });
+        }
 
         Ok(Spec {
             name,
@@ -843,6 +941,8 @@ impl Spec {
             checks,
             output: OutputSpec {
                 chord_tolerance_mm: chord_tolerance,
+                fit_tolerance_mm: fit_tolerance,
+                stl_tolerance_mm: stl_tolerance,
             },
         })
     }

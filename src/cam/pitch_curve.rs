@@ -291,6 +291,12 @@ fn advance(
     if ds <= 0.0 {
         return Ok(state);
     }
+    if ds < 1e-9 {
+        // Below the integrator's resolution (it would report step underflow): one Euler step,
+        // whose error ds^2 * kappa / 2 is far below 1e-12.
+        let (c, s) = field.unit_tangent(state[0], state[1]);
+        return Ok(Vector2::new(state[0] + ds * c, state[1] + ds * s));
+    }
     let mut solver = Dop853::new(
         ArcLengthSystem { field },
         s0,
@@ -328,6 +334,23 @@ pub struct PitchCurve {
 }
 
 impl PitchCurve {
+    /// The exact sample at arc length `s_mm` (0 <= s <= the last sample's s), integrated from
+    /// the nearest sample below at the synthesis tolerance: no interpolation.
+    pub fn exact_at_arc(&self, s_mm: f64) -> Result<PitchSample, CamError> {
+        let i = self
+            .samples
+            .partition_point(|q| q.s_mm <= s_mm)
+            .saturating_sub(1);
+        let base = self.samples[i];
+        let end = advance(
+            &self.field,
+            base.s_mm,
+            Vector2::new(base.x_mm, base.y_mm),
+            s_mm - base.s_mm,
+        )?;
+        Ok(self.field.sample(s_mm, end[0], end[1]))
+    }
+
     /// The final lift Y(Xmax).
     pub fn lift_mm(&self) -> f64 {
         self.samples.last().map_or(0.0, |s| s.y_mm)

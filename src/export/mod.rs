@@ -4,7 +4,11 @@
 //! in the same folder and renamed into place, so an interrupted run leaves either the old file
 //! or the new one, never a half-written one.
 
+pub mod drawing;
+pub mod dxf;
 pub mod plot;
+pub mod step;
+pub mod stl;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -16,6 +20,7 @@ use crate::cam::follower::{FrictionCorrection, SpringArrangement};
 use crate::design::Design;
 use crate::error::{Error, Result};
 use crate::law::Residuals;
+use crate::part::{self, Part, PartError};
 use crate::spec::Spec;
 use plot::{Panel, Series};
 
@@ -30,11 +35,15 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
         source,
     };
     std::fs::create_dir_all(dir).map_err(wrap)?;
-    let mut tmp = tempfile::Builder::new()
-        .prefix(".camspring-")
-        .suffix(".tmp")
-        .tempfile_in(dir)
-        .map_err(wrap)?;
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(".camspring-").suffix(".tmp");
+    #[cfg(unix)]
+    {
+        // tempfile creates 0600; outputs are ordinary readable files.
+        use std::os::unix::fs::PermissionsExt;
+        builder.permissions(std::fs::Permissions::from_mode(0o644));
+    }
+    let mut tmp = builder.tempfile_in(dir).map_err(wrap)?;
     tmp.write_all(bytes).map_err(wrap)?;
     tmp.as_file().sync_all().map_err(wrap)?;
     tmp.persist(path).map_err(|e| wrap(e.error))?;
@@ -116,6 +125,37 @@ pub struct ProfileSummary {
     pub chord_tolerance_mm: f64,
 }
 
+/// The part block of `design.json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct PartSummary {
+    /// Outline area minus holes (Green's theorem on the exact edges).
+    pub area_mm2: f64,
+    /// Area times thickness.
+    pub volume_mm3: f64,
+    /// Plate thickness.
+    pub thickness_mm: f64,
+    /// Bounding box minimum corner (x, y, z).
+    pub bounding_box_min_mm: [f64; 3],
+    /// Bounding box maximum corner (x, y, z).
+    pub bounding_box_max_mm: [f64; 3],
+    /// Added to design-frame y to get part y (mirrored for the lower edge).
+    pub frame_dy_mm: f64,
+    /// Length of the cam edges.
+    pub cam_edge_length_mm: f64,
+    /// Bezier spans of each cam edge's B-spline.
+    pub cam_edge_spans: Vec<usize>,
+    /// Largest deviation of the B-spline from the exact surface, as checked.
+    pub cam_edge_fit_deviation_mm: f64,
+    /// Fit tolerance asked.
+    pub fit_tolerance_mm: f64,
+    /// STL chord tolerance asked.
+    pub stl_tolerance_mm: f64,
+    /// Outline corner points, counter-clockwise, where segments meet.
+    pub outline_vertices_mm: Vec<[f64; 2]>,
+    /// Triangles in cam.stl.
+    pub stl_triangles: usize,
+}
+
 /// Everything in `design.json` (and `design --json`).
 #[derive(Debug, Clone, Serialize)]
 pub struct DesignSummary {
@@ -135,6 +175,10 @@ pub struct DesignSummary {
     pub profile: ProfileSummary,
     /// Checks.
     pub checks: Vec<Check>,
+    /// The part (null when refused).
+    pub part: Option<PartSummary>,
+    /// Why the part files were not written (an undercut), if they were not.
+    pub part_refused: Option<String>,
     /// Files written, relative to the output folder.
     pub outputs: Vec<String>,
 }
@@ -221,6 +265,8 @@ pub fn summarize(design: &Design, outputs: &[&str]) -> DesignSummary {
             chord_tolerance_mm: spec.output.chord_tolerance_mm,
         },
         checks: design.checks.clone(),
+        part: None,
+        part_refused: None,
         outputs: outputs.iter().map(|s| s.to_string()).collect(),
     }
 }
@@ -385,22 +431,88 @@ pub fn profile_svg(design: &Design) -> String {
     plot::document(&[panel], 760.0, 560.0).to_string()
 }
 
-/// Names of the files [`write_design`] writes.
+/// Names of the design files [`write_design`] always writes.
 pub const DESIGN_OUTPUTS: [&str; 4] = ["design.json", "profile.csv", "force.svg", "profile.svg"];
+/// Names of the part files, written when the part can be made.
+pub const PART_OUTPUTS: [&str; 4] = ["cam.step", "cam.stl", "cam.dxf", "drawing.svg"];
 
-/// Writes all design outputs into `dir` and returns the summary and the paths written.
+/// An output file in memory: its name in the output folder and its bytes.
+pub type NamedFile = (&'static str, Vec<u8>);
+
+/// The part files of a design, in memory, with the part's summary.
+pub fn part_files(design: &Design, part: &Part) -> Result<(PartSummary, Vec<NamedFile>)> {
+    let enc = |what: &'static str| move |e: String| Error::Encode { what, message: e };
+    let spec = &design.spec;
+    let step = step::step_text(part, &spec.name).map_err(|e| enc("cam.step")(e.to_string()))?;
+    let rings = stl::rings(
+        part,
+        spec.output.stl_tolerance_mm,
+        spec.output.chord_tolerance_mm,
+    );
+    let tris = stl::mesh(&rings, part.thickness_mm).map_err(|e| enc("cam.stl")(e.to_string()))?;
+    let dxf = dxf::dxf_bytes(part).map_err(enc("cam.dxf"))?;
+    let drawing = drawing::drawing_svg(design, part);
+    let (lo, hi) = part.bounding_box_mm;
+    let summary = PartSummary {
+        area_mm2: part.area_mm2,
+        volume_mm3: part.area_mm2 * part.thickness_mm,
+        thickness_mm: part.thickness_mm,
+        bounding_box_min_mm: [lo[0], lo[1], 0.0],
+        bounding_box_max_mm: [hi[0], hi[1], part.thickness_mm],
+        frame_dy_mm: part.frame.dy_mm,
+        cam_edge_length_mm: part.cam_edge_length_mm,
+        cam_edge_spans: part.cam_edges.iter().map(|e| e.points.len() - 1).collect(),
+        cam_edge_fit_deviation_mm: part
+            .cam_edges
+            .iter()
+            .map(|e| e.fit_deviation_mm)
+            .fold(0.0, f64::max),
+        fit_tolerance_mm: spec.output.fit_tolerance_mm,
+        stl_tolerance_mm: spec.output.stl_tolerance_mm,
+        stl_triangles: tris.len(),
+        outline_vertices_mm: part
+            .outline
+            .iter()
+            .map(|s| s.ends(&part.cam_edges).0)
+            .collect(),
+    };
+    let files = vec![
+        ("cam.step", step.into_bytes()),
+        ("cam.stl", stl::stl_bytes(&tris)),
+        ("cam.dxf", dxf),
+        ("drawing.svg", drawing.into_bytes()),
+    ];
+    Ok((summary, files))
+}
+
+/// Writes all outputs into `dir` and returns the summary and the paths written. The part
+/// files are refused (not written, and the reason recorded) when the cam surface undercuts.
 pub fn write_design(design: &Design, dir: &Path) -> Result<(DesignSummary, Vec<PathBuf>)> {
-    let summary = summarize(design, &DESIGN_OUTPUTS);
+    let (part_summary, part_refused, part_files) = match part::build(design) {
+        Ok(part) => {
+            let (summary, files) = part_files(design, &part)?;
+            (Some(summary), None, files)
+        }
+        Err(e @ PartError::Undercut { .. }) => (None, Some(e.to_string()), Vec::new()),
+        Err(e) => return Err(Error::Part(e)),
+    };
+    let mut names: Vec<&str> = DESIGN_OUTPUTS.to_vec();
+    names.extend(part_files.iter().map(|f| f.0));
+    let mut summary = summarize(design, &names);
+    summary.part = part_summary;
+    summary.part_refused = part_refused;
     let json = serde_json::to_vec_pretty(&summary).map_err(|e| Error::Encode {
         what: "design.json",
         message: e.to_string(),
     })?;
-    let files: [(&str, Vec<u8>); 4] = [
+    let mut files: Vec<(&str, Vec<u8>)> = vec![
         ("profile.csv", profile_csv(design)?),
         ("force.svg", force_svg(design).into_bytes()),
         ("profile.svg", profile_svg(design).into_bytes()),
-        ("design.json", json),
     ];
+    files.extend(part_files);
+    // design.json last: its presence with this run's content marks a complete set.
+    files.push(("design.json", json));
     let mut written = Vec::new();
     for (name, bytes) in files {
         let path = dir.join(name);
