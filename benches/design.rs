@@ -5,8 +5,9 @@ use std::hint::black_box;
 
 use camspring::cam::pitch_curve::synthesize;
 use camspring::design::{design, law_of, synthesis_options};
-use camspring::export::{force_svg, profile_csv, profile_svg, summarize};
+use camspring::export::{drawing, dxf, force_svg, profile_csv, profile_svg, step, stl, summarize};
 use camspring::law::solve;
+use camspring::part::build;
 use camspring::spec::{LawSpec, Spec, DEFAULT_SPEC_TOML};
 use criterion::{criterion_group, criterion_main, Criterion};
 
@@ -34,6 +35,27 @@ fn benches(c: &mut Criterion) {
         b.iter(|| {
             let s = serde_json::to_vec_pretty(&summarize(&d, &[])).unwrap();
             (s, profile_csv(&d).unwrap(), force_svg(&d), profile_svg(&d))
+        })
+    });
+    c.bench_function("part_build (outline, B-spline fit, area)", |b| {
+        b.iter(|| build(black_box(&d)).unwrap())
+    });
+    let part = build(&d).unwrap();
+    c.bench_function("step_export (solid + STEP text)", |b| {
+        b.iter(|| step::step_text(black_box(&part), "paper").unwrap())
+    });
+    c.bench_function("stl_export (5 um, mesh + bytes)", |b| {
+        b.iter(|| {
+            let rings = stl::rings(black_box(&part), 5e-3, 1e-3);
+            stl::stl_bytes(&stl::mesh(&rings, part.thickness_mm).unwrap())
+        })
+    });
+    c.bench_function("dxf_and_drawing_export", |b| {
+        b.iter(|| {
+            (
+                dxf::dxf_bytes(black_box(&part)).unwrap(),
+                drawing::drawing_svg(&d, &part),
+            )
         })
     });
     // A failing design: the advice searches re-synthesise the curve many times.

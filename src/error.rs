@@ -58,7 +58,7 @@ impl Error {
     pub fn is_bad_input(&self) -> bool {
         matches!(
             self,
-            Error::Spec { .. } | Error::Design(_) | Error::Read { .. }
+            Error::Spec { .. } | Error::Design(_) | Error::Part(_) | Error::Read { .. }
         )
     }
 }

@@ -29,7 +29,16 @@ fn default_design_writes_all_outputs_and_exits_zero() {
     assert_eq!(out.status.code(), Some(0));
     let stdout = String::from_utf8(out.stdout).unwrap();
     assert!(stdout.contains("alpha = 1.3201914760"), "{stdout}");
-    for f in ["design.json", "profile.csv", "force.svg", "profile.svg"] {
+    for f in [
+        "design.json",
+        "profile.csv",
+        "force.svg",
+        "profile.svg",
+        "cam.step",
+        "cam.stl",
+        "cam.dxf",
+        "drawing.svg",
+    ] {
         let p = dir.path().join("out/paper").join(f);
         assert!(p.metadata().unwrap().len() > 100, "{p:?}");
         assert!(
@@ -212,6 +221,28 @@ fn bad_specs_exit_two_naming_the_key_and_line() {
     assert!(String::from_utf8(out.stderr)
         .unwrap()
         .contains("no-such-file.toml"));
+}
+
+#[test]
+fn a_hole_that_does_not_fit_exits_two_naming_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let base = std::fs::read_to_string(spec_path("paper.toml")).unwrap();
+    let text = base.replace(
+        "[machining]",
+        "holes = [{ x = \"10 mm\", y = 0, diameter = \"4 mm\" }, { x = \"10 mm\", y = \"30 mm\", diameter = \"4 mm\" }]\n\n[machining]",
+    );
+    std::fs::write(dir.path().join("holes.toml"), text).unwrap();
+    let out = camspring(dir.path(), &["design", "holes.toml"]);
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8(out.stderr).unwrap();
+    assert!(
+        stderr.contains("part.holes[1]") && stderr.contains("outside"),
+        "{stderr}"
+    );
+    assert!(
+        !dir.path().join("out").exists(),
+        "nothing is written for bad input"
+    );
 }
 
 #[test]

@@ -3,6 +3,8 @@
 use camspring::cam::checks::Status;
 use camspring::cam::follower::FrictionCorrection;
 use camspring::design::design;
+use camspring::export::{step, stl};
+use camspring::part::{build, PartError};
 use camspring::spec::Spec;
 use camspring::units::{parse_quantity, Dimension};
 use proptest::prelude::*;
@@ -69,6 +71,23 @@ fn spec_params() -> impl Strategy<Value = SpecParams> {
                 }
             },
         )
+}
+
+/// Every directed edge appears once and its reverse once.
+fn watertight(tris: &[stl_io::Triangle]) -> bool {
+    use std::collections::HashMap;
+    let key = |v: &stl_io::Vertex| [v[0].to_bits(), v[1].to_bits(), v[2].to_bits()];
+    let mut edges: HashMap<([u32; 3], [u32; 3]), u32> = HashMap::new();
+    for t in tris {
+        for k in 0..3 {
+            *edges
+                .entry((key(&t.vertices[k]), key(&t.vertices[(k + 1) % 3])))
+                .or_default() += 1;
+        }
+    }
+    edges
+        .iter()
+        .all(|((a, b), n)| *n == 1 && edges.get(&(*b, *a)) == Some(&1))
 }
 
 fn toml_of(p: &SpecParams) -> String {
@@ -141,6 +160,29 @@ proptest! {
                         prop_assert!(((pred - f.design_n) / f.design_n).abs() < 1e-6,
                             "x = {}: predicted {pred} vs law {}", q.x_mm, f.design_n);
                     }
+                }
+                // The part: a closed solid and a watertight mesh, or a refusal for an undercut.
+                match build(&d) {
+                    Ok(part) => {
+                        prop_assert!(d.cam_surface.is_followable());
+                        let solid = step::solid(&part).expect("a followable design gives a solid");
+                        prop_assert_eq!(
+                            solid.boundaries()[0].shell_condition(),
+                            truck_topology::shell::ShellCondition::Closed
+                        );
+                        let rings = stl::rings(&part, spec.output.stl_tolerance_mm, spec.output.chord_tolerance_mm);
+                        let tris = stl::mesh(&rings, part.thickness_mm).expect("mesh");
+                        prop_assert!(watertight(&tris), "mesh not watertight");
+                        prop_assert!(part.area_mm2 > 0.0);
+                        for e in &part.cam_edges {
+                            prop_assert!(e.fit_deviation_mm <= spec.output.fit_tolerance_mm);
+                        }
+                    }
+                    Err(PartError::Undercut { advice, .. }) => {
+                        prop_assert!(!d.cam_surface.is_followable());
+                        prop_assert!(!advice.is_empty());
+                    }
+                    Err(e) => prop_assert!(false, "unexpected part error: {e}"),
                 }
                 prop_assert_eq!(d.checks.len(), 5);
                 for c in &d.checks {
