@@ -15,7 +15,7 @@ use crate::design::Design;
 use crate::part::{Part, Segment, P2};
 
 const MARGIN: f64 = 25.0;
-const TITLE_H: f64 = 38.0;
+const TITLE_H: f64 = 45.0;
 const TITLE_W: f64 = 180.0;
 const STROKE: &str = "#000";
 
@@ -280,8 +280,16 @@ pub fn drawing_svg(design: &Design, part: &Part) -> String {
     let tx = width - TITLE_W - 10.0;
     let ty = height - TITLE_H - 5.0;
     let cam = &spec.part.cam_material;
+    let targets = match &spec.law {
+        crate::spec::LawSpec::Targets(t) => format!(
+            "spec: fmax {} N at xmax {} mm, fmin {} N at l0 {} mm, c0 {} at delta0 {} mm",
+            t.fmax_n, t.xmax_mm, t.fmin_n, t.l0_mm, t.c0, t.delta0_mm
+        ),
+        crate::spec::LawSpec::Given { .. } => "spec: law given directly (mu, k2, f0)".to_string(),
+    };
     let rows = [
         format!("camspring cam part: {}", spec.name),
+        targets,
         format!(
             "law: F = {:.6} N x exp({:.6} /mm x x) + {:.6} N over x = 0 ... {xmax} mm",
             law.mu_n, law.k2_per_mm, law.f0_n

@@ -119,6 +119,13 @@ def test_stl_is_watertight_outward_and_matches_the_solid(design):
     holes = summary["spec"]["part"]["holes"]
     bound = tol * part["thickness_mm"] * (part["cam_edge_length_mm"] + sum(math.pi * h["diameter_mm"] for h in holes))
     assert abs(mesh.volume - analytic) <= bound + 1e-6 * analytic, (mesh.volume, analytic, bound)
+    # ... and so against the STEP solid's volume as OpenCASCADE computes it.
+    from OCP.BRepGProp import BRepGProp
+    from OCP.GProp import GProp_GProps
+
+    props = GProp_GProps()
+    BRepGProp.VolumeProperties_s(read_step(out / "cam.step")[1], props, 1e-10)
+    assert abs(mesh.volume - props.Mass()) <= bound + 1e-5 * analytic, (mesh.volume, props.Mass(), bound)
     # Stored facet normals agree with the winding (outward).
     assert np.all((mesh.face_normals * trimesh.load(out / "cam.stl", process=False).face_normals).sum(1) > 0.99)
 
