@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use crate::design::DesignError;
 use crate::part::PartError;
 use crate::spec::SpecError;
+use crate::toolpath::ToolpathError;
 
 /// Any failure of a camspring command.
 #[derive(Debug, thiserror::Error)]
@@ -25,6 +26,10 @@ pub enum Error {
     /// that does not fit, or a fit that cannot reach its tolerance).
     #[error("part: {0}")]
     Part(#[from] PartError),
+    /// Produced by [`crate::export::write_design`] when the machining settings are unusable
+    /// (a tolerance finer than the dialect writes).
+    #[error("machining: {0}")]
+    Toolpath(#[from] ToolpathError),
     /// Produced when an input file cannot be read.
     #[error("cannot read {path}: {source}")]
     Read {
@@ -58,7 +63,11 @@ impl Error {
     pub fn is_bad_input(&self) -> bool {
         matches!(
             self,
-            Error::Spec { .. } | Error::Design(_) | Error::Part(_) | Error::Read { .. }
+            Error::Spec { .. }
+                | Error::Design(_)
+                | Error::Part(_)
+                | Error::Toolpath(_)
+                | Error::Read { .. }
         )
     }
 }

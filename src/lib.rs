@@ -26,6 +26,7 @@ pub mod law;
 pub mod part;
 pub mod run;
 pub mod spec;
+pub mod toolpath;
 pub mod units;
 
 pub use design::{design, Design, DesignError};

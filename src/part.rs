@@ -248,6 +248,18 @@ fn edge_point(sample: &PitchSample, r: f64, frame: &PartFrame, mirrored: bool) -
     }
 }
 
+/// The exact point of a cam edge at pitch arc length `s_mm`, with d(point)/ds: evaluated by
+/// integrating the pitch-curve ODE, not from the fit.
+pub fn exact_edge_point(
+    pitch: &PitchCurve,
+    r: f64,
+    frame: &PartFrame,
+    mirrored: bool,
+    s_mm: f64,
+) -> Result<EdgePoint, CamError> {
+    Ok(edge_point(&pitch.exact_at_arc(s_mm)?, r, frame, mirrored))
+}
+
 fn dist(a: P2, b: P2) -> f64 {
     (a[0] - b[0]).hypot(a[1] - b[1])
 }

@@ -144,6 +144,26 @@ pub fn format_design(run: &DesignRun) -> String {
         }
         (None, None) => {}
     }
+    match (&s.gcode, &s.gcode_refused) {
+        (Some(g), _) => {
+            let _ = writeln!(
+                o,
+                "  gcode    {} blocks ({:?}, {}), {} rough levels of {:.3} mm + finish, fit within {:.1e} mm (budget {:.1e}), about {:.1} min",
+                g.blocks,
+                g.dialect,
+                if g.arcs { "arcs" } else { "lines only" },
+                g.toolpath.rough_levels,
+                g.toolpath.depth_step_mm,
+                g.toolpath.max_fit_deviation_mm,
+                g.toolpath.fit_budget_mm,
+                g.toolpath.estimated_minutes
+            );
+        }
+        (None, Some(why)) => {
+            let _ = writeln!(o, "  gcode    REFUSED: {why}");
+        }
+        (None, None) => {}
+    }
     let _ = writeln!(o, "  checks");
     for c in &s.checks {
         let _ = writeln!(

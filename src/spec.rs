@@ -153,11 +153,66 @@ pub struct PartSpec {
     pub holes: Vec<Hole>,
 }
 
-/// Machining settings known to the design core (the cutter decides what concave radius can be made).
+/// The G-code dialect to write.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Dialect {
+    /// LinuxCNC (rs274ngc).
+    Linuxcnc,
+    /// GRBL 1.1 (no tool change, short lines).
+    Grbl,
+    /// Fanuc-style (%, O number, G43, M30, upper-case comments).
+    Fanuc,
+}
+
+/// Coolant command.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Coolant {
+    /// M8.
+    Flood,
+    /// M7.
+    Mist,
+    /// None.
+    Off,
+}
+
+/// Machining settings: the cutter (which also decides what concave radius can be made) and
+/// how the G-code mills the part.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct MachiningSpec {
     /// End mill diameter.
     pub tool_diameter_mm: f64,
+    /// Spindle speed.
+    pub spindle_rpm: f64,
+    /// Cutting feed.
+    pub feed_mm_per_min: f64,
+    /// Plunge feed.
+    pub plunge_feed_mm_per_min: f64,
+    /// Depth of each roughing pass.
+    pub depth_per_pass_mm: f64,
+    /// Material left by roughing for the finishing pass.
+    pub stock_allowance_mm: f64,
+    /// Height for rapid moves.
+    pub safe_z_mm: f64,
+    /// Top of the stock.
+    pub stock_top_z_mm: f64,
+    /// Cut below the part's bottom face.
+    pub breakthrough_mm: f64,
+    /// Largest deviation of the programmed path from the ideal tool-centre path.
+    pub tolerance_mm: f64,
+    /// Climb milling (with a clockwise spindle) instead of conventional.
+    pub climb: bool,
+    /// Radius of the tangential lead-in and lead-out arcs.
+    pub lead_in_radius_mm: f64,
+    /// G-code dialect.
+    pub dialect: Dialect,
+    /// Work offset (G54 ... G59).
+    pub work_offset: String,
+    /// Coolant.
+    pub coolant: Coolant,
+    /// G2/G3 arcs (false: G1 lines only, for controllers without arcs).
+    pub arcs: bool,
 }
 
 /// Limits for the design checks.
@@ -284,6 +339,21 @@ struct RawHole {
 #[serde(deny_unknown_fields)]
 struct RawMachining {
     tool_diameter: Q,
+    spindle_rpm: Q,
+    feed: Q,
+    plunge_feed: Q,
+    depth_per_pass: Q,
+    stock_allowance: Q,
+    safe_z: Q,
+    stock_top_z: Q,
+    breakthrough: Q,
+    tolerance: Q,
+    climb: Option<bool>,
+    lead_in_radius: Q,
+    dialect: Option<Spanned<String>>,
+    work_offset: Option<Spanned<String>>,
+    coolant: Option<Spanned<String>>,
+    arcs: Option<bool>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -844,16 +914,143 @@ impl Spec {
                 .collect::<Result<Vec<Hole>, SpecError>>()?,
         };
 
-        let tool_diameter = match &raw.machining {
-            Some(m) => r.optional(
-                "machining.tool_diameter",
-                &m.tool_diameter,
-                D::Length,
-                Range::Positive,
-            )?,
-            None => None,
-        }
-        .unwrap_or(6.0);
+        let machining = {
+            let empty = RawMachining {
+                tool_diameter: None,
+                spindle_rpm: None,
+                feed: None,
+                plunge_feed: None,
+                depth_per_pass: None,
+                stock_allowance: None,
+                safe_z: None,
+                stock_top_z: None,
+                breakthrough: None,
+                tolerance: None,
+                climb: None,
+                lead_in_radius: None,
+                dialect: None,
+                work_offset: None,
+                coolant: None,
+                arcs: None,
+            };
+            let m = raw.machining.as_ref().unwrap_or(&empty);
+            let len = |key: &str, q: &Q, range: Range, default: f64| -> Result<f64, SpecError> {
+                Ok(
+                    r.optional(&format!("machining.{key}"), q, D::Length, range)?
+                        .unwrap_or(default),
+                )
+            };
+            let tool_diameter = len("tool_diameter", &m.tool_diameter, Range::Positive, 6.0)?;
+            let depth_per_pass = len("depth_per_pass", &m.depth_per_pass, Range::Positive, 1.0)?;
+            // A pass deeper than the cutter diameter overloads an end mill slotting full width.
+            if depth_per_pass > tool_diameter {
+                let q = m
+                    .depth_per_pass
+                    .as_ref()
+                    .expect("larger than the default needs a value");
+                return Err(r.invalid(
+                    "machining.depth_per_pass",
+                    Some(q.span().start),
+                    format!("{depth_per_pass} mm"),
+                    format!("at most the tool diameter, {tool_diameter} mm (full-width slotting)"),
+                ));
+            }
+            let safe_z = len("safe_z", &m.safe_z, Range::Any, 5.0)?;
+            let stock_top_z = len("stock_top_z", &m.stock_top_z, Range::Any, 0.0)?;
+            if safe_z <= stock_top_z {
+                return Err(SpecError::Invalid {
+                    key: "machining.safe_z".into(),
+                    line: m.safe_z.as_ref().map(|q| r.line(q.span().start)),
+                    found: format!("{safe_z} mm"),
+                    expected: format!("a height above machining.stock_top_z = {stock_top_z} mm"),
+                });
+            }
+            let work_offset = match &m.work_offset {
+                None => "G54".to_string(),
+                Some(w) => {
+                    let v = w.get_ref().trim().to_ascii_uppercase();
+                    if !["G54", "G55", "G56", "G57", "G58", "G59"].contains(&v.as_str()) {
+                        return Err(r.invalid(
+                            "machining.work_offset",
+                            Some(w.span().start),
+                            format!("\"{}\"", w.get_ref()),
+                            "one of G54, G55, G56, G57, G58, G59".into(),
+                        ));
+                    }
+                    v
+                }
+            };
+            let dialect = match r.choice(
+                "machining.dialect",
+                &m.dialect,
+                &["linuxcnc", "grbl", "fanuc"],
+                "linuxcnc",
+            )? {
+                "grbl" => Dialect::Grbl,
+                "fanuc" => Dialect::Fanuc,
+                _ => Dialect::Linuxcnc,
+            };
+            // Default path tolerance: 1 um where 4 decimals are written (LinuxCNC), 2 um where
+            // 3 decimals are (GRBL, Fanuc), leaving room for the rounding of the output.
+            let default_tolerance = if dialect == Dialect::Linuxcnc {
+                1e-3
+            } else {
+                2e-3
+            };
+            MachiningSpec {
+                tool_diameter_mm: tool_diameter,
+                spindle_rpm: r
+                    .optional(
+                        "machining.spindle_rpm",
+                        &m.spindle_rpm,
+                        D::RotationalSpeed,
+                        Range::Open(0.0, 200_000.0),
+                    )?
+                    .unwrap_or(8000.0),
+                feed_mm_per_min: r
+                    .optional("machining.feed", &m.feed, D::FeedRate, Range::Positive)?
+                    .unwrap_or(600.0),
+                plunge_feed_mm_per_min: r
+                    .optional(
+                        "machining.plunge_feed",
+                        &m.plunge_feed,
+                        D::FeedRate,
+                        Range::Positive,
+                    )?
+                    .unwrap_or(150.0),
+                depth_per_pass_mm: depth_per_pass,
+                stock_allowance_mm: len(
+                    "stock_allowance",
+                    &m.stock_allowance,
+                    Range::NonNegative,
+                    0.2,
+                )?,
+                safe_z_mm: safe_z,
+                stock_top_z_mm: stock_top_z,
+                breakthrough_mm: len("breakthrough", &m.breakthrough, Range::NonNegative, 0.5)?,
+                tolerance_mm: len(
+                    "tolerance",
+                    &m.tolerance,
+                    Range::Closed(1e-5, 0.5),
+                    default_tolerance,
+                )?,
+                climb: m.climb.unwrap_or(true),
+                lead_in_radius_mm: len("lead_in_radius", &m.lead_in_radius, Range::Positive, 2.0)?,
+                dialect,
+                work_offset,
+                coolant: match r.choice(
+                    "machining.coolant",
+                    &m.coolant,
+                    &["flood", "mist", "off"],
+                    "flood",
+                )? {
+                    "mist" => Coolant::Mist,
+                    "off" => Coolant::Off,
+                    _ => Coolant::Flood,
+                },
+                arcs: m.arcs.unwrap_or(true),
+            }
+        };
 
         let empty_checks = RawChecks {
             max_pressure_angle: None,
@@ -935,9 +1132,7 @@ impl Spec {
             law,
             follower,
             part,
-            machining: MachiningSpec {
-                tool_diameter_mm: tool_diameter,
-            },
+            machining,
             checks,
             output: OutputSpec {
                 chord_tolerance_mm: chord_tolerance,

@@ -22,6 +22,10 @@ pub enum Dimension {
     Angle,
     /// Stress or elastic modulus; default MPa (= N/mm²).
     Stress,
+    /// Feed rate; default mm/min.
+    FeedRate,
+    /// Rotational speed; default rev/min.
+    RotationalSpeed,
     /// A pure number (ratios, coefficients).
     Dimensionless,
 }
@@ -39,6 +43,8 @@ impl Dimension {
             Dimension::InverseLength => "1/mm",
             Dimension::Angle => "deg",
             Dimension::Stress => "MPa",
+            Dimension::FeedRate => "mm/min",
+            Dimension::RotationalSpeed => "rpm",
             Dimension::Dimensionless => "",
         }
     }
@@ -52,6 +58,8 @@ impl Dimension {
             Dimension::InverseLength => "an inverse length such as \"0.26 /mm\"",
             Dimension::Angle => "an angle such as \"60 deg\"",
             Dimension::Stress => "a stress such as \"460 MPa\"",
+            Dimension::FeedRate => "a feed rate such as \"600 mm/min\"",
+            Dimension::RotationalSpeed => "a spindle speed such as \"8000 rpm\"",
             Dimension::Dimensionless => "a plain number",
         }
     }
@@ -110,6 +118,19 @@ impl Dimension {
                 ("Pa", 1e-6),
                 ("psi", LBF_N / (IN_MM * IN_MM)),
                 ("ksi", 1000.0 * LBF_N / (IN_MM * IN_MM)),
+            ],
+            Dimension::FeedRate => &[
+                ("mm/min", 1.0),
+                ("mm/s", 60.0),
+                ("m/min", 1000.0),
+                ("in/min", IN_MM),
+                ("ipm", IN_MM),
+            ],
+            Dimension::RotationalSpeed => &[
+                ("rpm", 1.0),
+                ("rev/min", 1.0),
+                ("1/min", 1.0),
+                ("rev/s", 60.0),
             ],
             Dimension::Dimensionless => &[],
         }

@@ -177,6 +177,16 @@ proptest! {
                         for e in &part.cam_edges {
                             prop_assert!(e.fit_deviation_mm <= spec.output.fit_tolerance_mm);
                         }
+                        // Machining: a program, or a refusal that names what to change.
+                        match camspring::toolpath::passes(&d, &part) {
+                            Ok((passes, summary)) => {
+                                prop_assert!(summary.max_fit_deviation_mm <= summary.fit_budget_mm);
+                                let (text, _) = camspring::toolpath::gcode::write(&d, &passes, &summary);
+                                prop_assert!(text.ends_with("M2\n"));
+                            }
+                            Err(e) => prop_assert!(e.to_string().contains("machining.tool_diameter")
+                                || e.to_string().contains("drill it"), "{e}"),
+                        }
                     }
                     Err(PartError::Undercut { advice, .. }) => {
                         prop_assert!(!d.cam_surface.is_followable());

@@ -22,6 +22,7 @@ use crate::error::{Error, Result};
 use crate::law::Residuals;
 use crate::part::{self, Part, PartError};
 use crate::spec::Spec;
+use crate::toolpath::{self, ToolpathError, ToolpathSummary};
 use plot::{Panel, Series};
 
 /// Writes `bytes` to `path` atomically (temporary file in the same folder, then rename).
@@ -156,6 +157,20 @@ pub struct PartSummary {
     pub stl_triangles: usize,
 }
 
+/// The G-code block of `design.json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct GcodeSummary {
+    /// Dialect written.
+    pub dialect: crate::spec::Dialect,
+    /// Arcs (G2/G3) or lines only.
+    pub arcs: bool,
+    /// Blocks (lines that are not comments).
+    pub blocks: usize,
+    /// Path statistics.
+    #[serde(flatten)]
+    pub toolpath: ToolpathSummary,
+}
+
 /// Everything in `design.json` (and `design --json`).
 #[derive(Debug, Clone, Serialize)]
 pub struct DesignSummary {
@@ -179,6 +194,10 @@ pub struct DesignSummary {
     pub part: Option<PartSummary>,
     /// Why the part files were not written (an undercut), if they were not.
     pub part_refused: Option<String>,
+    /// The G-code program (null when refused or no part).
+    pub gcode: Option<GcodeSummary>,
+    /// Why cam.ngc was not written, if it was not.
+    pub gcode_refused: Option<String>,
     /// Files written, relative to the output folder.
     pub outputs: Vec<String>,
 }
@@ -267,6 +286,8 @@ pub fn summarize(design: &Design, outputs: &[&str]) -> DesignSummary {
         checks: design.checks.clone(),
         part: None,
         part_refused: None,
+        gcode: None,
+        gcode_refused: None,
         outputs: outputs.iter().map(|s| s.to_string()).collect(),
     }
 }
@@ -435,6 +456,126 @@ pub fn profile_svg(design: &Design) -> String {
 pub const DESIGN_OUTPUTS: [&str; 4] = ["design.json", "profile.csv", "force.svg", "profile.svg"];
 /// Names of the part files, written when the part can be made.
 pub const PART_OUTPUTS: [&str; 4] = ["cam.step", "cam.stl", "cam.dxf", "drawing.svg"];
+/// Names of the machining files, written when the cutter can make the part.
+pub const GCODE_OUTPUTS: [&str; 2] = ["cam.ngc", "toolpath.svg"];
+
+/// The G-code program and tool-path plot of a part, in memory.
+pub fn gcode_files(
+    design: &Design,
+    part: &Part,
+) -> Result<(GcodeSummary, Vec<NamedFile>), ToolpathError> {
+    let (passes, stats) = toolpath::passes(design, part)?;
+    let (text, blocks) = toolpath::gcode::write(design, &passes, &stats);
+    let svg = toolpath_svg(design, part, &passes);
+    let m = &design.spec.machining;
+    Ok((
+        GcodeSummary {
+            dialect: m.dialect,
+            arcs: m.arcs,
+            blocks,
+            toolpath: stats,
+        },
+        vec![
+            ("cam.ngc", text.into_bytes()),
+            ("toolpath.svg", svg.into_bytes()),
+        ],
+    ))
+}
+
+/// `toolpath.svg`: the part outline with the finishing and last roughing passes, to scale.
+pub fn toolpath_svg(design: &Design, part: &Part, passes: &[toolpath::Pass]) -> String {
+    let mut outline = Vec::new();
+    for seg in &part.outline {
+        match seg {
+            part::Segment::Line { from, .. } => outline.push((from[0], from[1])),
+            part::Segment::Cam { edge, reversed } => {
+                let mut pts: Vec<(f64, f64)> = part.cam_edges[*edge]
+                    .points_dense
+                    .iter()
+                    .map(|p| (p[0], p[1]))
+                    .collect();
+                if *reversed {
+                    pts.reverse();
+                }
+                outline.extend(pts);
+            }
+        }
+    }
+    if let Some(&first) = outline.first() {
+        outline.push(first);
+    }
+    let mut series = vec![Series {
+        label: "part outline".into(),
+        points: outline,
+        color: "#000",
+        dashed: false,
+    }];
+    let deepest_rough = passes
+        .iter()
+        .filter(|p| !p.finishing)
+        .map(|p| p.z_mm)
+        .fold(f64::INFINITY, f64::min);
+    let mut rapids = Vec::new();
+    for p in passes
+        .iter()
+        .filter(|p| p.finishing || p.z_mm == deepest_rough)
+    {
+        let mut pts = vec![(p.entry[0], p.entry[1])];
+        let mut from = p.entry;
+        for mv in &p.moves {
+            pts.extend(
+                toolpath::path::sample_move(from, mv, 12)
+                    .into_iter()
+                    .skip(1)
+                    .map(|q| (q[0], q[1])),
+            );
+            from = mv.to();
+        }
+        rapids.push((from[0], from[1]));
+        rapids.push((p.entry[0], p.entry[1]));
+        let (label, color) = if p.finishing {
+            ("finishing (tool centre)", "#c62828")
+        } else {
+            ("roughing (tool centre)", "#1565c0")
+        };
+        let label = if series.iter().any(|s| s.label == label) {
+            String::new()
+        } else {
+            label.to_string()
+        };
+        series.push(Series {
+            label,
+            points: pts,
+            color,
+            dashed: false,
+        });
+    }
+    series.push(Series {
+        label: "rapids".into(),
+        points: rapids,
+        color: "#999",
+        dashed: true,
+    });
+    let panel = Panel {
+        title: format!(
+            "Tool path of '{}': {} mm cutter, {} ({} dialect)",
+            design.spec.name,
+            design.spec.machining.tool_diameter_mm,
+            if design.spec.machining.climb {
+                "climb"
+            } else {
+                "conventional"
+            },
+            toolpath::gcode::dialect_name(design.spec.machining.dialect)
+        ),
+        x_label: "x (mm)".into(),
+        y_label: "y (mm)".into(),
+        series,
+        equal_aspect: true,
+        ..Panel::default()
+    };
+    plot::document(&[panel], 820.0, 640.0).to_string()
+}
 
 /// An output file in memory: its name in the output folder and its bytes.
 pub type NamedFile = (&'static str, Vec<u8>);
@@ -488,19 +629,40 @@ pub fn part_files(design: &Design, part: &Part) -> Result<(PartSummary, Vec<Name
 /// Writes all outputs into `dir` and returns the summary and the paths written. The part
 /// files are refused (not written, and the reason recorded) when the cam surface undercuts.
 pub fn write_design(design: &Design, dir: &Path) -> Result<(DesignSummary, Vec<PathBuf>)> {
-    let (part_summary, part_refused, part_files) = match part::build(design) {
+    let mut gcode = (None, None);
+    let (part_summary, part_refused, mut part_files) = match part::build(design) {
         Ok(part) => {
             let (summary, files) = part_files(design, &part)?;
+            gcode = match gcode_files(design, &part) {
+                Ok((g, f)) => (Some((g, f)), None),
+                Err(e @ ToolpathError::Resolution { .. }) => return Err(Error::Toolpath(e)),
+                Err(e) => (
+                    None,
+                    Some(format!("cam.ngc and toolpath.svg are not written: {e}")),
+                ),
+            };
             (Some(summary), None, files)
         }
         Err(e @ PartError::Undercut { .. }) => (None, Some(e.to_string()), Vec::new()),
         Err(e) => return Err(Error::Part(e)),
+    };
+    let (gcode_summary, gcode_refused) = match gcode {
+        (Some((g, files)), r) => {
+            part_files.extend(files);
+            (Some(g), r)
+        }
+        (None, r) => (None, r),
     };
     let mut names: Vec<&str> = DESIGN_OUTPUTS.to_vec();
     names.extend(part_files.iter().map(|f| f.0));
     let mut summary = summarize(design, &names);
     summary.part = part_summary;
     summary.part_refused = part_refused;
+    summary.gcode = gcode_summary;
+    if gcode_refused.is_some() {
+        summary.status = Status::Fail;
+    }
+    summary.gcode_refused = gcode_refused;
     let json = serde_json::to_vec_pretty(&summary).map_err(|e| Error::Encode {
         what: "design.json",
         message: e.to_string(),

@@ -29,6 +29,9 @@ friction = 0.02
 [part]
 thickness = "8 mm"
 holes = [{ x = "10 mm", y = "-5 mm", diameter = "4 mm" }, { x = "2 mm", y = "-5 mm", diameter = "3 mm" }]
+[machining]
+tool_diameter = "2 mm"
+depth_per_pass = "1.5 mm"
 [output]
 chord_tolerance = "0.0001 mm"
 """
@@ -88,6 +91,7 @@ def distance_to_polyline(points, poly):
     b = poly[1:][None, :, :]
     p = points[:, None, :]
     ab = b - a
-    t = np.clip(((p - a) * ab).sum(-1) / (ab * ab).sum(-1), 0.0, 1.0)
+    l2 = np.maximum((ab * ab).sum(-1), 1e-300)
+    t = np.clip(((p - a) * ab).sum(-1) / l2, 0.0, 1.0)
     closest = a + t[..., None] * ab
     return np.sqrt(((p - closest) ** 2).sum(-1)).min(axis=1)
