@@ -990,7 +990,7 @@ impl Spec {
                 "fanuc" => Dialect::Fanuc,
                 _ => Dialect::Linuxcnc,
             };
-            // Default path tolerance: 1 um where 4 decimals are written (LinuxCNC), 2 um where
+            // Default path tolerance: 1 um where 5 decimals are written (LinuxCNC), 2 um where
             // 3 decimals are (GRBL, Fanuc), leaving room for the rounding of the output.
             let default_tolerance = if dialect == Dialect::Linuxcnc {
                 1e-3

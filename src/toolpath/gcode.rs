@@ -17,7 +17,7 @@ use crate::spec::{Coolant, Dialect};
 /// Decimals written for coordinates in a dialect.
 pub fn decimals(d: Dialect) -> usize {
     match d {
-        Dialect::Linuxcnc => 4,
+        Dialect::Linuxcnc => 5,
         Dialect::Grbl | Dialect::Fanuc => 3,
     }
 }

@@ -141,18 +141,11 @@ pub fn contour(
                     let t = scale(q.d, sign / norm(q.d));
                     Ok((add(q.p, scale(right(t), d)), t))
                 };
-                // Start from the Hermite knots (already dense enough for the surface).
-                let mut knots: Vec<f64> = e
-                    .points
-                    .iter()
-                    .map(|q| if *reversed { s1 - q.s_mm } else { q.s_mm - s0 })
-                    .collect();
-                knots.sort_by(f64::total_cmp);
-                for w in knots.windows(2) {
-                    let (ms, dev) = fit_curve(&eval, w[0], w[1], budget, arcs)?;
-                    moves.extend(ms);
-                    worst = worst.max(dev);
-                }
+                // One piece over the whole edge, split where the fit misses: coarse tolerances
+                // get long arcs, fine ones as many as they need.
+                let (ms, dev) = fit_curve(&eval, 0.0, s1 - s0, budget, arcs)?;
+                moves.extend(ms);
+                worst = worst.max(dev);
             }
         }
         // Join to the next segment around the shared corner (convex: a left turn).

@@ -1,0 +1,81 @@
+//! Block count and measured path deviation of G2/G3 arc output against G1-only output at
+//! 10, 1 and 0.1 um tolerance, for the default spec (the table in docs/BENCHMARKS.md).
+//!
+//! Run: `cargo run --release --example gcode_table`
+//!
+//! The deviation is measured, not taken from the fitter: the finishing contour's moves are
+//! sampled densely and compared with the exact part outline (ODE samples at 10 nm chords);
+//! |distance - cutter radius| is the error of the programmed tool-centre path. Output
+//! rounding (at most 0.007 um at LinuxCNC's 5 decimals) comes on top and is budgeted for.
+
+use camspring::design::design;
+use camspring::part::{build, Segment};
+use camspring::spec::{Spec, DEFAULT_SPEC_TOML};
+use camspring::toolpath::path::sample_move;
+use camspring::toolpath::{gcode, passes};
+
+fn main() {
+    let mut reference = Spec::from_toml(DEFAULT_SPEC_TOML).unwrap();
+    reference.output.chord_tolerance_mm = 1e-5;
+    let d = design(&reference).unwrap();
+    let part = build(&d).unwrap();
+    let mut poly = Vec::new();
+    for seg in &part.outline {
+        match seg {
+            Segment::Line { from, .. } => poly.push(*from),
+            Segment::Cam { edge, reversed } => {
+                let mut pts = part.cam_edges[*edge].points_dense.clone();
+                if *reversed {
+                    pts.reverse();
+                }
+                pts.pop();
+                poly.extend(pts);
+            }
+        }
+    }
+    let dist = |p: [f64; 2]| {
+        (0..poly.len())
+            .map(|i| {
+                let (a, b) = (poly[i], poly[(i + 1) % poly.len()]);
+                let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+                let t = (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / (dx * dx + dy * dy))
+                    .clamp(0.0, 1.0);
+                (a[0] + t * dx - p[0]).hypot(a[1] + t * dy - p[1])
+            })
+            .fold(f64::INFINITY, f64::min)
+    };
+    println!("| tolerance | output | blocks | contour moves (finish) | measured max deviation |");
+    println!("| --- | --- | --- | --- | --- |");
+    for tol in [0.01, 0.001, 0.0001] {
+        for arcs in [true, false] {
+            let mut spec = Spec::from_toml(DEFAULT_SPEC_TOML).unwrap();
+            spec.machining.tolerance_mm = tol;
+            spec.machining.arcs = arcs;
+            let d = design(&spec).unwrap();
+            let part = build(&d).unwrap();
+            let (ps, summary) = passes(&d, &part).unwrap();
+            let (_, blocks) = gcode::write(&d, &ps, &summary);
+            let finish = ps.iter().find(|p| p.finishing).unwrap();
+            let radius = spec.machining.tool_diameter_mm / 2.0;
+            let mut from = finish.entry;
+            let mut worst = 0.0_f64;
+            let contour = finish.lead_in..finish.moves.len() - finish.lead_out;
+            for (k, m) in finish.moves.iter().enumerate() {
+                if contour.contains(&k) {
+                    for q in sample_move(from, m, 32) {
+                        worst = worst.max((dist(q) - radius).abs());
+                    }
+                }
+                from = m.to();
+            }
+            println!(
+                "| {} um | {} | {} | {} | {:.3} um |",
+                tol * 1e3,
+                if arcs { "G2/G3 arcs" } else { "G1 only" },
+                blocks,
+                contour.len(),
+                worst * 1e3
+            );
+        }
+    }
+}
