@@ -58,6 +58,12 @@ fn benches(c: &mut Criterion) {
             )
         })
     });
+    c.bench_function("gcode (passes + program, 1 um, arcs)", |b| {
+        b.iter(|| {
+            let (passes, summary) = camspring::toolpath::passes(black_box(&d), &part).unwrap();
+            camspring::toolpath::gcode::write(&d, &passes, &summary)
+        })
+    });
     // A failing design: the advice searches re-synthesise the curve many times.
     let literal = Spec::from_toml(include_str!("../specs/paper-literal.toml")).unwrap();
     c.bench_function("design_pipeline_with_advice (paper-literal)", |b| {

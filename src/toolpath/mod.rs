@@ -405,25 +405,25 @@ pub fn passes(design: &Design, part: &Part) -> Result<(Vec<Pass>, ToolpathSummar
         }
     }
 
-    // The outline.
-    for (k, (offset, z, finishing)) in (1..=levels)
-        .map(|k| {
-            (
-                radius + m.stock_allowance_mm,
-                m.stock_top_z_mm - step * k as f64,
-                false,
-            )
-        })
-        .chain(std::iter::once((radius, z_final, true)))
+    // The outline: one contour per offset (all roughing levels share theirs).
+    let rough_contour = contour(design, part, radius + m.stock_allowance_mm, budget, m.arcs)?;
+    let finish_contour = contour(design, part, radius, budget, m.arcs)?;
+    for (k, (z, finishing)) in (1..=levels)
+        .map(|k| (m.stock_top_z_mm - step * k as f64, false))
+        .chain(std::iter::once((z_final, true)))
         .enumerate()
     {
-        let (ccw_path, dev) = contour(design, part, offset, budget, m.arcs)?;
-        worst = worst.max(dev);
+        let (ccw_path, dev) = if finishing {
+            &finish_contour
+        } else {
+            &rough_contour
+        };
+        worst = worst.max(*dev);
         // Outside a part, climb milling with a clockwise spindle runs clockwise.
         let path = if m.climb {
-            reversed(&ccw_path)
+            reversed(ccw_path)
         } else {
-            ccw_path
+            ccw_path.clone()
         };
         let (path, t) = start_on_longest_line(&path);
         let outward = if m.climb { left(t) } else { right(t) };
