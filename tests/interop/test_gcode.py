@@ -196,3 +196,26 @@ def test_a_cutter_too_large_for_the_cam_is_refused(tmp_path):
     assert summary["gcode"] is None
     assert "end mill of at most" in summary["gcode_refused"]
     assert not (out / "cam.ngc").exists()
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_random_machining_settings_pass_rs274_and_the_path_checks(tmp_path, seed):
+    """Property-style sweep over machining ranges (seeded, so failures reproduce)."""
+    rng = np.random.default_rng(seed)
+    spec = (ROOT / "specs" / ("paper.toml" if seed % 2 == 0 else "ankle.toml")).read_text()
+    tool = float(rng.uniform(1.0, 8.0))
+    settings = {
+        "tool_diameter": f'"{tool:.3f} mm"',
+        "depth_per_pass": f'"{rng.uniform(0.3, tool):.3f} mm"',
+        "stock_allowance": f'"{rng.uniform(0.0, 0.5):.3f} mm"',
+        "lead_in_radius": f'"{rng.uniform(0.5, 4.0):.3f} mm"',
+        "climb": "true" if rng.random() < 0.5 else "false",
+        "arcs": "true" if rng.random() < 0.7 else "false",
+        "tolerance": f'"{rng.choice([0.0005, 0.001, 0.005, 0.02])} mm"',
+    }
+    lines = [l for l in spec.splitlines() if not l.startswith("tool_diameter")]
+    i = lines.index("[machining]")
+    lines[i + 1 : i + 1] = [f"{k} = {v}" for k, v in settings.items()]
+    out, summary = design_into("\n".join(lines) + "\n", tmp_path)
+    assert summary["gcode"] is not None, summary["gcode_refused"]
+    check_program(out, summary, tmp_path)
