@@ -213,6 +213,12 @@ pub struct MachiningSpec {
     pub coolant: Coolant,
     /// G2/G3 arcs (false: G1 lines only, for controllers without arcs).
     pub arcs: bool,
+    /// Holding tabs left on the outline's straight edges (0: none).
+    pub tabs: usize,
+    /// Width of each tab (the bridge left between part and stock).
+    pub tab_width_mm: f64,
+    /// Height of each tab above the part's bottom face.
+    pub tab_height_mm: f64,
 }
 
 /// Limits for the design checks.
@@ -354,6 +360,9 @@ struct RawMachining {
     work_offset: Option<Spanned<String>>,
     coolant: Option<Spanned<String>>,
     arcs: Option<bool>,
+    tabs: Option<Spanned<i64>>,
+    tab_width: Q,
+    tab_height: Q,
 }
 
 #[derive(Debug, Deserialize)]
@@ -932,6 +941,9 @@ impl Spec {
                 work_offset: None,
                 coolant: None,
                 arcs: None,
+                tabs: None,
+                tab_width: None,
+                tab_height: None,
             };
             let m = raw.machining.as_ref().unwrap_or(&empty);
             let len = |key: &str, q: &Q, range: Range, default: f64| -> Result<f64, SpecError> {
@@ -1049,6 +1061,34 @@ impl Spec {
                     _ => Coolant::Flood,
                 },
                 arcs: m.arcs.unwrap_or(true),
+                tabs: match &m.tabs {
+                    None => 0,
+                    Some(t) if (0..=16).contains(t.get_ref()) => *t.get_ref() as usize,
+                    Some(t) => {
+                        return Err(r.invalid(
+                            "machining.tabs",
+                            Some(t.span().start),
+                            t.get_ref().to_string(),
+                            "a number of tabs from 0 to 16".into(),
+                        ))
+                    }
+                },
+                tab_width_mm: len("tab_width", &m.tab_width, Range::Positive, 3.0)?,
+                tab_height_mm: {
+                    let h = len("tab_height", &m.tab_height, Range::Positive, 1.0)?;
+                    if h >= part.thickness_mm {
+                        return Err(SpecError::Invalid {
+                            key: "machining.tab_height".into(),
+                            line: m.tab_height.as_ref().map(|q| r.line(q.span().start)),
+                            found: format!("{h} mm"),
+                            expected: format!(
+                                "less than part.thickness = {} mm",
+                                part.thickness_mm
+                            ),
+                        });
+                    }
+                    h
+                },
             }
         };
 

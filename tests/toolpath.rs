@@ -225,3 +225,43 @@ fn program_text_follows_the_rules() {
     }
     assert!(!text.contains("G41") && !text.contains("G42"));
 }
+
+#[test]
+fn tabs_lift_over_the_straight_edges_or_are_refused() {
+    let mut spec = paper();
+    spec.machining.tabs = 2;
+    spec.machining.tab_width_mm = 3.0;
+    let d = design(&spec).unwrap();
+    let part = build(&d).unwrap();
+    let (ps, _) = passes(&d, &part).unwrap();
+    let tab_z =
+        spec.machining.stock_top_z_mm - spec.part.thickness_mm + spec.machining.tab_height_mm;
+    for p in ps.iter().filter(|p| p.label.starts_with("outline")) {
+        let lifts: Vec<f64> = p
+            .moves
+            .iter()
+            .enumerate()
+            .filter(|(k, _)| p.over_tab[*k])
+            .map(|(k, m)| {
+                let from = if k == 0 { p.entry } else { p.moves[k - 1].to() };
+                let to = m.to();
+                (to[0] - from[0]).hypot(to[1] - from[1])
+            })
+            .collect();
+        if p.z_mm < tab_z {
+            assert_eq!(lifts.len(), 2, "{}", p.label);
+            for l in lifts {
+                assert!((l - (3.0 + spec.machining.tool_diameter_mm)).abs() < 1e-9);
+            }
+        } else {
+            assert!(lifts.is_empty());
+        }
+    }
+    spec.machining.tabs = 16;
+    spec.machining.tab_width_mm = 10.0;
+    let d = design(&spec).unwrap();
+    match passes(&d, &build(&d).unwrap()) {
+        Err(ToolpathError::Tabs { needed_mm, .. }) => assert_eq!(needed_mm, 16.0),
+        other => panic!("{other:?}"),
+    }
+}

@@ -245,6 +245,28 @@ pub fn write(design: &Design, passes: &[Pass], summary: &ToolpathSummary) -> (St
         );
         let mut from = p.entry;
         for (k, mv) in p.moves.iter().enumerate() {
+            let z = if p.over_tab[k] { p.tab_z_mm } else { p.z_mm };
+            if p.over_tab[k] && (k == 0 || !p.over_tab[k - 1]) {
+                w.comment("tab");
+                w.words(
+                    Motion::Feed,
+                    from[0],
+                    from[1],
+                    z,
+                    None,
+                    Some(m.plunge_feed_mm_per_min),
+                );
+            }
+            if !p.over_tab[k] && k > 0 && p.over_tab[k - 1] {
+                w.words(
+                    Motion::Feed,
+                    from[0],
+                    from[1],
+                    z,
+                    None,
+                    Some(m.plunge_feed_mm_per_min),
+                );
+            }
             if k == 0 {
                 w.comment("lead-in");
             }
@@ -255,21 +277,16 @@ pub fn write(design: &Design, passes: &[Pass], summary: &ToolpathSummary) -> (St
                 w.comment("lead-out");
             }
             match *mv {
-                Move::Line { to } => w.words(
-                    Motion::Feed,
-                    to[0],
-                    to[1],
-                    p.z_mm,
-                    None,
-                    Some(m.feed_mm_per_min),
-                ),
+                Move::Line { to } => {
+                    w.words(Motion::Feed, to[0], to[1], z, None, Some(m.feed_mm_per_min))
+                }
                 Move::Arc { to, center, ccw } => {
                     let motion = if ccw { Motion::Ccw } else { Motion::Cw };
                     w.words(
                         motion,
                         to[0],
                         to[1],
-                        p.z_mm,
+                        z,
                         Some((center[0] - from[0], center[1] - from[1])),
                         Some(m.feed_mm_per_min),
                     );

@@ -73,6 +73,22 @@ pub enum ToolpathError {
         /// Worst rounding of a point.
         rounding_mm: f64,
     },
+    /// Produced by [`passes`] when the tabs do not fit on the outline's straight edges.
+    #[error(
+        "{tabs} holding tabs of {tab_width_mm} mm need straight edges of at least {needed_mm:.3} mm \
+         (tab width plus cutter diameter) each; the longest is {longest_mm:.3} mm. Use fewer or \
+         narrower tabs (machining.tabs, machining.tab_width)"
+    )]
+    Tabs {
+        /// Tabs asked.
+        tabs: usize,
+        /// Tab width.
+        tab_width_mm: f64,
+        /// Path length one tab needs.
+        needed_mm: f64,
+        /// Longest straight edge of the path.
+        longest_mm: f64,
+    },
     /// Produced by [`program`] when an exact evaluation of the cam fails.
     #[error("cam edge: {0}")]
     Cam(#[from] CamError),
@@ -260,6 +276,10 @@ pub struct Pass {
     pub lead_in: usize,
     /// How many of the last moves are the lead-out.
     pub lead_out: usize,
+    /// Moves that run over a holding tab, at `tab_z_mm` instead of `z_mm` (same length as `moves`).
+    pub over_tab: Vec<bool>,
+    /// Height of the tab tops.
+    pub tab_z_mm: f64,
     /// Depth.
     pub z_mm: f64,
     /// Whether this is the finishing pass of its feature.
@@ -386,6 +406,7 @@ pub fn passes(design: &Design, part: &Part) -> Result<(Vec<Pass>, ToolpathSummar
             };
             let (lead_in, lead_out) = (lead.len(), back.len());
             let moves: Vec<Move> = lead.into_iter().chain(body).chain(back).collect();
+            let over_tab = vec![false; moves.len()];
             out.push(Pass {
                 label: format!(
                     "hole {index} {}",
@@ -399,12 +420,16 @@ pub fn passes(design: &Design, part: &Part) -> Result<(Vec<Pass>, ToolpathSummar
                 moves,
                 lead_in,
                 lead_out,
+                over_tab,
+                tab_z_mm: z,
                 z_mm: z,
                 finishing,
             });
         }
     }
 
+    // Tabs stand `tab_height` above the part's bottom face.
+    let tab_z = m.stock_top_z_mm - part.thickness_mm + m.tab_height_mm;
     // The outline: one contour per offset (all roughing levels share theirs).
     let rough_contour = contour(design, part, radius + m.stock_allowance_mm, budget, m.arcs)?;
     let finish_contour = contour(design, part, radius, budget, m.arcs)?;
@@ -453,11 +478,21 @@ pub fn passes(design: &Design, part: &Part) -> Result<(Vec<Pass>, ToolpathSummar
             )
         };
         let (lead_in, lead_out) = (lead.len(), back.len());
-        let moves: Vec<Move> = lead
-            .into_iter()
-            .chain(path.moves.iter().copied())
-            .chain(back)
+        let (contour_moves, contour_tabs) = if m.tabs > 0 && z < tab_z - 1e-9 {
+            with_tabs(
+                &path,
+                m.tabs,
+                m.tab_width_mm + m.tool_diameter_mm,
+                m.tab_width_mm,
+            )?
+        } else {
+            (path.moves.clone(), vec![false; path.moves.len()])
+        };
+        let over_tab: Vec<bool> = std::iter::repeat_n(false, lead_in)
+            .chain(contour_tabs)
+            .chain(std::iter::repeat_n(false, lead_out))
             .collect();
+        let moves: Vec<Move> = lead.into_iter().chain(contour_moves).chain(back).collect();
         out.push(Pass {
             label: format!(
                 "outline {}",
@@ -471,6 +506,8 @@ pub fn passes(design: &Design, part: &Part) -> Result<(Vec<Pass>, ToolpathSummar
             moves,
             lead_in,
             lead_out,
+            over_tab,
+            tab_z_mm: tab_z,
             z_mm: z,
             finishing,
         });
@@ -497,6 +534,74 @@ pub fn passes(design: &Design, part: &Part) -> Result<(Vec<Pass>, ToolpathSummar
         estimated_minutes: length / m.feed_mm_per_min + plunge / m.plunge_feed_mm_per_min,
     };
     Ok((out, summary))
+}
+
+/// Splits the longest straight moves of a closed path so that `tabs` pieces of length `lift`
+/// (tab width plus cutter diameter) can run over holding tabs, evenly spaced on their lines.
+/// Returns the moves and which of them are over a tab.
+fn with_tabs(
+    path: &Path2,
+    tabs: usize,
+    lift: f64,
+    tab_width: f64,
+) -> Result<(Vec<Move>, Vec<bool>), ToolpathError> {
+    let mut lines: Vec<(usize, f64)> = Vec::new();
+    let mut from = path.start;
+    let mut starts = Vec::with_capacity(path.moves.len());
+    for (k, mv) in path.moves.iter().enumerate() {
+        starts.push(from);
+        if let Move::Line { to } = *mv {
+            lines.push((k, dist(from, to)));
+        }
+        from = mv.to();
+    }
+    lines.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let longest = lines.first().map_or(0.0, |l| l.1);
+    // Give the tabs to the longest lines in turn, each line taking as many as fit.
+    let mut count = vec![0usize; path.moves.len()];
+    for i in 0..tabs {
+        let pick = (0..lines.len())
+            .map(|j| lines[(i + j) % lines.len()])
+            .find(|(k, len)| (count[*k] + 1) as f64 * lift <= *len);
+        match pick {
+            Some((k, _)) => count[k] += 1,
+            None => {
+                return Err(ToolpathError::Tabs {
+                    tabs,
+                    tab_width_mm: tab_width,
+                    needed_mm: lift,
+                    longest_mm: longest,
+                })
+            }
+        }
+    }
+    let mut moves = Vec::new();
+    let mut over = Vec::new();
+    for (k, mv) in path.moves.iter().enumerate() {
+        let n = count[k];
+        if n == 0 {
+            moves.push(*mv);
+            over.push(false);
+            continue;
+        }
+        let (a, b) = (starts[k], mv.to());
+        let len = dist(a, b);
+        let dir = scale(sub(b, a), 1.0 / len);
+        for j in 0..n {
+            let centre = len * (j as f64 + 0.5) / n as f64;
+            moves.push(Move::Line {
+                to: add(a, scale(dir, centre - lift / 2.0)),
+            });
+            over.push(false);
+            moves.push(Move::Line {
+                to: add(a, scale(dir, centre + lift / 2.0)),
+            });
+            over.push(true);
+        }
+        moves.push(Move::Line { to: b });
+        over.push(false);
+    }
+    Ok((moves, over))
 }
 
 /// An arc from `from` to `to` about `center` as lines within `budget` (chord sagitta).

@@ -36,6 +36,8 @@ def moves(canon):
             text = line.split('COMMENT("', 1)[1].rsplit('")', 1)[0]
             if text in ("lead-in", "contour", "lead-out"):
                 section = text
+            elif text == "tab":
+                pass
             elif not text.startswith("interpreter"):
                 label, section = text, ""
         elif "SET_FEED_RATE(" in line:
@@ -117,6 +119,7 @@ def check_program(out, summary, tmp_path, ngc="cam.ngc"):
     all_moves = list(moves(canon))
     finish_pts = []
     z_final = min(e[2] for _, _, e, _, _ in all_moves)
+    tab_top = top - summary["spec"]["part"]["thickness_mm"] + spec["tab_height_mm"]
     worst_gouge = np.inf
     for kind, s, e, extra, st in all_moves:
         if kind == "STRAIGHT_TRAVERSE":
@@ -131,7 +134,9 @@ def check_program(out, summary, tmp_path, ngc="cam.ngc"):
         if min(s[2], e[2]) < top:
             worst_gouge = min(worst_gouge, distance_to_part(pts, poly, holes).min())
         if st["label"].startswith("outline finish") and st["section"] == "contour":
-            assert abs(e[2] - z_final) < 1e-9 and abs(s[2] - z_final) < 1e-9
+            if abs(s[0] - e[0]) < 1e-9 and abs(s[1] - e[1]) < 1e-9:
+                continue  # vertical move onto or off a holding tab
+            assert abs(e[2] - s[2]) < 1e-9 and (abs(e[2] - z_final) < 1e-9 or abs(e[2] - tab_top) < 1e-9)
             finish_pts.append(pts)
     # No gouge anywhere: the tool centre stays at least one radius (less the tolerance) away.
     assert worst_gouge >= radius - tol, (worst_gouge, radius)
@@ -219,3 +224,27 @@ def test_random_machining_settings_pass_rs274_and_the_path_checks(tmp_path, seed
     out, summary = design_into("\n".join(lines) + "\n", tmp_path)
     assert summary["gcode"] is not None, summary["gcode_refused"]
     check_program(out, summary, tmp_path)
+
+
+def test_holding_tabs_leave_bridges_of_the_asked_width(tmp_path):
+    text = (ROOT / "specs" / "paper.toml").read_text().replace(
+        "[machining]", '[machining]\ntabs = 3\ntab_width = "2.5 mm"\ntab_height = "1.2 mm"'
+    )
+    out, summary = design_into(text, tmp_path)
+    canon = check_program(out, summary, tmp_path)
+    m = summary["spec"]["machining"]
+    top = m["stock_top_z_mm"]
+    tab_top = top - summary["spec"]["part"]["thickness_mm"] + m["tab_height_mm"]
+    # Below the tab tops, the finishing pass leaves 3 gaps; each gap's tool-centre length is the
+    # tab width plus the cutter diameter, so the bridge left is the tab width.
+    lifted = []
+    for kind, s, e, extra, st in moves(canon):
+        if st["label"].startswith("outline finish") and kind == "STRAIGHT_FEED" and abs(s[2] - tab_top) < 1e-9 and abs(e[2] - tab_top) < 1e-9:
+            lifted.append(math.hypot(e[0] - s[0], e[1] - s[1]))
+    assert len(lifted) == 3, lifted
+    for length in lifted:
+        assert abs(length - (m["tab_width_mm"] + m["tool_diameter_mm"])) < 1e-4
+    # Roughing levels above the tab tops cut straight through; those below lift too.
+    assert canon.count('COMMENT("tab")') == 3 * sum(
+        1 for line in canon.splitlines() if 'COMMENT("outline' in line and float(line.rsplit("Z", 1)[1].rstrip('")')) < tab_top - 1e-9
+    )
