@@ -6,8 +6,9 @@
 //! Biologically Inspired Flexible Mechanical Transmission with Exponential Elastic
 //! Characteristic*.
 //!
-//! The design layers ([`law`], [`cam`], [`design`]) are pure computation. [`spec`] reads the
-//! TOML spec, [`export`] writes files, [`run`] is what the command line calls.
+//! The design layers ([`law`], [`cam`], [`mod@design`], [`part`], [`toolpath`]) are pure computation. [`spec`] reads the
+//! TOML spec, [`export`] writes files (design data, STEP, STL, DXF, drawings, G-code), [`run`]
+//! is what the command line calls.
 //!
 //! ```
 //! use camspring::{design::design, spec::{Spec, DEFAULT_SPEC_TOML}};

@@ -7,7 +7,7 @@
 //! fitted with biarcs within the tolerance minus the output rounding. Holes are circles of
 //! the hole radius minus the offset.
 //!
-//! [`program`] puts the passes together: holes first (while the part is still held), then the
+//! [`passes`] puts the passes together: holes first (while the part is still held), then the
 //! outline, each roughed in equal depth steps to the full thickness plus breakthrough with
 //! the stock allowance left, then finished in one pass at full depth. Every pass enters and
 //! leaves on tangential arcs. [`gcode`] writes the result for a dialect.
@@ -25,7 +25,7 @@ use path::{add, cross, dist, fit_curve, left, norm, right, scale, sub, Move, Pat
 /// Why no tool path can be made.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ToolpathError {
-    /// Produced by [`program`] when the cutter cannot reach into a concave part of the cam.
+    /// Produced by [`passes`] when the cutter cannot reach into a concave part of the cam.
     #[error(
         "the cutter (radius {tool_radius_mm} mm) cannot make the cam surface: its smallest concave \
          radius is {concave_radius_mm:.4} mm at x = {at_x_mm:.3} mm; use an end mill of at most {max_diameter_mm:.3} mm \
@@ -41,7 +41,7 @@ pub enum ToolpathError {
         /// Largest diameter that fits.
         max_diameter_mm: f64,
     },
-    /// Produced by [`program`] when a hole is not larger than the cutter plus allowance.
+    /// Produced by [`passes`] when a hole is not larger than the cutter plus allowance.
     #[error(
         "part.holes[{index}] (diameter {diameter_mm} mm) is too small to mill with a {tool_diameter_mm} mm cutter \
          and {allowance_mm} mm allowance; drill it, or use a cutter below {max_tool_mm:.3} mm"
@@ -58,7 +58,7 @@ pub enum ToolpathError {
         /// Largest tool that can mill it.
         max_tool_mm: f64,
     },
-    /// Produced by [`program`] when the tolerance is finer than the dialect's number format.
+    /// Produced by [`passes`] when the tolerance is finer than the dialect's number format.
     #[error(
         "machining.tolerance = {tolerance_mm} mm is finer than the {dialect} output resolution \
          ({decimals} decimals, rounding up to {rounding_mm:.2e} mm); raise the tolerance"
@@ -89,7 +89,7 @@ pub enum ToolpathError {
         /// Longest straight edge of the path.
         longest_mm: f64,
     },
-    /// Produced by [`program`] when an exact evaluation of the cam fails.
+    /// Produced by [`passes`] when an exact evaluation of the cam fails.
     #[error("cam edge: {0}")]
     Cam(#[from] CamError),
 }
