@@ -9,7 +9,7 @@
 //! rounding (at most 0.007 um at LinuxCNC's 5 decimals) comes on top and is budgeted for.
 
 use camspring::design::design;
-use camspring::part::{build, Segment};
+use camspring::part::build;
 use camspring::spec::{Spec, DEFAULT_SPEC_TOML};
 use camspring::toolpath::path::sample_move;
 use camspring::toolpath::{gcode, passes};
@@ -19,20 +19,7 @@ fn main() {
     reference.output.chord_tolerance_mm = 1e-5;
     let d = design(&reference).unwrap();
     let part = build(&d).unwrap();
-    let mut poly = Vec::new();
-    for seg in &part.outline {
-        match seg {
-            Segment::Line { from, .. } => poly.push(*from),
-            Segment::Cam { edge, reversed } => {
-                let mut pts = part.cam_edges[*edge].points_dense.clone();
-                if *reversed {
-                    pts.reverse();
-                }
-                pts.pop();
-                poly.extend(pts);
-            }
-        }
-    }
+    let poly = part.outline_polygon();
     let dist = |p: [f64; 2]| {
         (0..poly.len())
             .map(|i| {

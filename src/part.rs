@@ -218,6 +218,14 @@ pub struct Part {
     pub cam_edge_length_mm: f64,
 }
 
+impl Part {
+    /// The outline as a closed polygon (no repeated first point) through the corners and every
+    /// exact cam-edge sample (chord error `output.chord_tolerance`), counter-clockwise.
+    pub fn outline_polygon(&self) -> Vec<P2> {
+        outline_polygon(&self.outline, &self.cam_edges)
+    }
+}
+
 impl Segment {
     /// Start and end points.
     pub fn ends(&self, part_edges: &[CamEdge]) -> (P2, P2) {
@@ -376,14 +384,15 @@ fn green_line(a: P2, b: P2) -> f64 {
     0.5 * (a[0] * b[1] - b[0] * a[1])
 }
 
-/// The outline as a polygon through the exact edge points (for hole checks).
+/// The outline as a closed polygon (no repeated first point) through the corners and every
+/// exact cam-edge sample, counter-clockwise.
 fn outline_polygon(outline: &[Segment], edges: &[CamEdge]) -> Vec<P2> {
     let mut poly = Vec::new();
     for seg in outline {
         match seg {
             Segment::Line { from, .. } => poly.push(*from),
             Segment::Cam { edge, reversed } => {
-                let pts: Vec<P2> = edges[*edge].points.iter().map(|q| q.p).collect();
+                let pts = &edges[*edge].points_dense;
                 if *reversed {
                     poly.extend(pts.iter().rev().take(pts.len() - 1));
                 } else {

@@ -5,7 +5,7 @@
 use camspring::design::design;
 use camspring::export::step::solid;
 use camspring::export::stl::{mesh, rings};
-use camspring::part::{build, Part, PartError, Segment};
+use camspring::part::{build, Part, PartError};
 use camspring::spec::{Hole, Spec, DEFAULT_SPEC_TOML};
 use truck_modeling::{BSplineCurve, KnotVec, ParametricCurve, Point3};
 use truck_topology::shell::ShellCondition;
@@ -80,20 +80,7 @@ fn green_area_agrees_with_a_fine_polygon() {
     let mut spec = paper();
     spec.output.chord_tolerance_mm = 1e-5;
     let (_, part) = part_of(&spec);
-    let mut poly = Vec::new();
-    for seg in &part.outline {
-        match seg {
-            Segment::Line { from, .. } => poly.push(*from),
-            Segment::Cam { edge, reversed } => {
-                let mut pts = part.cam_edges[*edge].points_dense.clone();
-                if *reversed {
-                    pts.reverse();
-                }
-                pts.pop();
-                poly.extend(pts);
-            }
-        }
-    }
+    let poly = part.outline_polygon();
     let inscribed = polygon_area(&poly);
     // Chords of sagitta <= 1e-5 mm along ~50 mm of cam edge change the area by < 2/3 * 1e-5 * 50.
     let bound = 2.0 / 3.0 * 1e-5 * part.cam_edge_length_mm;

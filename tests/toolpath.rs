@@ -2,7 +2,7 @@
 //! refusals, and the G-code text rules.
 
 use camspring::design::design;
-use camspring::part::{build, Segment};
+use camspring::part::build;
 use camspring::spec::{Hole, Spec, DEFAULT_SPEC_TOML};
 use camspring::toolpath::path::{sample_move, Move};
 use camspring::toolpath::{contour, gcode, passes, ToolpathError};
@@ -16,22 +16,7 @@ fn boundary(spec: &Spec) -> Vec<[f64; 2]> {
     let mut fine = spec.clone();
     fine.output.chord_tolerance_mm = 1e-4;
     let d = design(&fine).unwrap();
-    let part = build(&d).unwrap();
-    let mut poly = Vec::new();
-    for seg in &part.outline {
-        match seg {
-            Segment::Line { from, .. } => poly.push(*from),
-            Segment::Cam { edge, reversed } => {
-                let mut pts = part.cam_edges[*edge].points_dense.clone();
-                if *reversed {
-                    pts.reverse();
-                }
-                pts.pop();
-                poly.extend(pts);
-            }
-        }
-    }
-    poly
+    build(&d).unwrap().outline_polygon()
 }
 
 fn dist_to_polygon(p: [f64; 2], poly: &[[f64; 2]]) -> f64 {

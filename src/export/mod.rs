@@ -484,23 +484,11 @@ pub fn gcode_files(
 
 /// `toolpath.svg`: the part outline with the finishing and last roughing passes, to scale.
 pub fn toolpath_svg(design: &Design, part: &Part, passes: &[toolpath::Pass]) -> String {
-    let mut outline = Vec::new();
-    for seg in &part.outline {
-        match seg {
-            part::Segment::Line { from, .. } => outline.push((from[0], from[1])),
-            part::Segment::Cam { edge, reversed } => {
-                let mut pts: Vec<(f64, f64)> = part.cam_edges[*edge]
-                    .points_dense
-                    .iter()
-                    .map(|p| (p[0], p[1]))
-                    .collect();
-                if *reversed {
-                    pts.reverse();
-                }
-                outline.extend(pts);
-            }
-        }
-    }
+    let mut outline: Vec<(f64, f64)> = part
+        .outline_polygon()
+        .iter()
+        .map(|p| (p[0], p[1]))
+        .collect();
     if let Some(&first) = outline.first() {
         outline.push(first);
     }
