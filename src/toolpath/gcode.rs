@@ -246,18 +246,12 @@ pub fn write(design: &Design, passes: &[Pass], summary: &ToolpathSummary) -> (St
         let mut from = p.entry;
         for (k, mv) in p.moves.iter().enumerate() {
             let z = if p.over_tab[k] { p.tab_z_mm } else { p.z_mm };
-            if p.over_tab[k] && (k == 0 || !p.over_tab[k - 1]) {
-                w.comment("tab");
-                w.words(
-                    Motion::Feed,
-                    from[0],
-                    from[1],
-                    z,
-                    None,
-                    Some(m.plunge_feed_mm_per_min),
-                );
-            }
-            if !p.over_tab[k] && k > 0 && p.over_tab[k - 1] {
+            let was_over = k > 0 && p.over_tab[k - 1];
+            if p.over_tab[k] != was_over {
+                // Onto or off a holding tab: a vertical move at the plunge feed.
+                if p.over_tab[k] {
+                    w.comment("tab");
+                }
                 w.words(
                     Motion::Feed,
                     from[0],

@@ -408,14 +408,7 @@ pub fn passes(design: &Design, part: &Part) -> Result<(Vec<Pass>, ToolpathSummar
             let moves: Vec<Move> = lead.into_iter().chain(body).chain(back).collect();
             let over_tab = vec![false; moves.len()];
             out.push(Pass {
-                label: format!(
-                    "hole {index} {}",
-                    if finishing {
-                        "finish".to_string()
-                    } else {
-                        format!("rough {}/{levels}", k + 1)
-                    }
-                ),
+                label: pass_label(&format!("hole {index}"), finishing, k, levels),
                 entry: c,
                 moves,
                 lead_in,
@@ -494,14 +487,7 @@ pub fn passes(design: &Design, part: &Part) -> Result<(Vec<Pass>, ToolpathSummar
             .collect();
         let moves: Vec<Move> = lead.into_iter().chain(contour_moves).chain(back).collect();
         out.push(Pass {
-            label: format!(
-                "outline {}",
-                if finishing {
-                    "finish".to_string()
-                } else {
-                    format!("rough {}/{levels}", k + 1)
-                }
-            ),
+            label: pass_label("outline", finishing, k, levels),
             entry,
             moves,
             lead_in,
@@ -602,6 +588,15 @@ fn with_tabs(
         over.push(false);
     }
     Ok((moves, over))
+}
+
+/// "outline rough 3/11", "hole 0 finish": the pass name written into the program.
+fn pass_label(feature: &str, finishing: bool, k: usize, levels: usize) -> String {
+    if finishing {
+        format!("{feature} finish")
+    } else {
+        format!("{feature} rough {}/{levels}", k + 1)
+    }
 }
 
 /// An arc from `from` to `to` about `center` as lines within `budget` (chord sagitta).
