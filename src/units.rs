@@ -5,8 +5,6 @@
 //! knows the accepted units of each dimension and converts to the default unit. It knows
 //! nothing about TOML or keys; [`crate::spec`] adds the key and line to any error.
 
-use std::fmt;
-
 /// The physical dimension of a spec quantity, which fixes its default unit.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Dimension {
@@ -219,21 +217,6 @@ fn number_prefix_len(text: &str) -> usize {
         }
     }
     best
-}
-
-/// A value with its default-unit name, for display ("5 N/mm").
-#[derive(Debug, Clone, Copy)]
-pub struct Shown(pub f64, pub Dimension);
-
-impl fmt::Display for Shown {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let unit = self.1.default_unit();
-        if unit.is_empty() {
-            write!(f, "{}", self.0)
-        } else {
-            write!(f, "{} {}", self.0, unit)
-        }
-    }
 }
 
 #[cfg(test)]

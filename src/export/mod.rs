@@ -454,10 +454,6 @@ pub fn profile_svg(design: &Design) -> String {
 
 /// Names of the design files [`write_design`] always writes.
 pub const DESIGN_OUTPUTS: [&str; 4] = ["design.json", "profile.csv", "force.svg", "profile.svg"];
-/// Names of the part files, written when the part can be made.
-pub const PART_OUTPUTS: [&str; 4] = ["cam.step", "cam.stl", "cam.dxf", "drawing.svg"];
-/// Names of the machining files, written when the cutter can make the part.
-pub const GCODE_OUTPUTS: [&str; 2] = ["cam.ngc", "toolpath.svg"];
 
 /// The G-code program and tool-path plot of a part, in memory.
 pub fn gcode_files(
