@@ -30,6 +30,24 @@ pub enum Error {
     /// (a tolerance finer than the dialect writes).
     #[error("machining: {0}")]
     Toolpath(#[from] ToolpathError),
+    /// Produced by [`crate::run::read_log_file`] for a malformed calibration log.
+    #[error("log {path}: {source}")]
+    Log {
+        /// The log file.
+        path: PathBuf,
+        /// What is wrong, with the line.
+        #[source]
+        source: crate::estimate::log::LogError,
+    },
+    /// Produced by [`crate::run::run_simulate`] when the run cannot be simulated.
+    #[error("simulate: {0}")]
+    Simulate(#[from] crate::estimate::sim::SimError),
+    /// Produced by [`crate::run::run_identify`] when the log cannot identify the spring.
+    #[error("identify: {0}")]
+    Identify(#[from] crate::estimate::identify::IdentifyError),
+    /// Produced by the commands for an unusable option value.
+    #[error("{0}")]
+    Argument(String),
     /// Produced when an input file cannot be read.
     #[error("cannot read {path}: {source}")]
     Read {
@@ -68,6 +86,10 @@ impl Error {
                 | Error::Part(_)
                 | Error::Toolpath(_)
                 | Error::Read { .. }
+                | Error::Log { .. }
+                | Error::Simulate(_)
+                | Error::Identify(_)
+                | Error::Argument(_)
         )
     }
 }

@@ -8,7 +8,8 @@
 //!
 //! The design layers ([`law`], [`cam`], [`mod@design`], [`part`], [`toolpath`]) are pure computation. [`spec`] reads the
 //! TOML spec, [`export`] writes files (design data, STEP, STL, DXF, drawings, G-code), [`run`]
-//! is what the command line calls.
+//! is what the command line calls. [`estimate`] reads calibration logs of a built spring,
+//! simulates them with known truth, models sensor noise and identifies the parameters.
 //!
 //! ```
 //! use camspring::{design::design, spec::{Spec, DEFAULT_SPEC_TOML}};
@@ -22,6 +23,7 @@
 pub mod cam;
 pub mod design;
 pub mod error;
+pub mod estimate;
 pub mod export;
 pub mod law;
 pub mod part;

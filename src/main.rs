@@ -8,7 +8,17 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
-use camspring::run::{format_design, run_design, EXIT_BAD_INPUT, EXIT_IO};
+use camspring::estimate::identify::SensorNoise;
+use camspring::estimate::log::{parse_column, parse_time_column, ColumnMap};
+use camspring::estimate::report::{
+    format_identification, format_noise, identification_json, noise_json,
+};
+use camspring::estimate::sim::{Dynamics, Noise, Profile, SimSettings};
+use camspring::estimate::{parse_duration_s, parse_fraction, parse_rate_hz};
+use camspring::run::{
+    format_design, load_noise_json, run_design, run_identify, run_noise, run_simulate,
+    SimulateOptions, EXIT_BAD_INPUT, EXIT_IO,
+};
 
 #[derive(Parser, Debug)]
 #[command(name = "camspring", version, about = "Design exponential cam springs and check them", long_about = None)]
@@ -36,6 +46,197 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Simulate a calibration run of the spec's designed spring, with known truth.
+    ///
+    /// The log is CSV (t_s,force_n,position_mm); the truth JSON holds the parameters and
+    /// sigma(t), D(t), M at every sample.
+    ///
+    /// Examples:
+    ///   camspring simulate specs/paper.toml -o out/paper/calib.csv --truth out/paper/truth.json
+    ///   camspring simulate --profile static --duration 600s -o static.csv
+    ///   camspring simulate --profile steps --d0 0.2 --seed 7 --rate 1kHz
+    #[command(verbatim_doc_comment)]
+    Simulate {
+        /// Spec file (TOML); the built-in default spec when omitted.
+        spec: Option<PathBuf>,
+        /// Log to write (default out/<spec name>/calib.csv).
+        #[arg(short, long)]
+        out: Option<PathBuf>,
+        /// Truth JSON to write (default: the log's name with .truth.json).
+        #[arg(long)]
+        truth: Option<PathBuf>,
+        /// Motion: sines, ramp-hold, steps or static.
+        #[arg(long, default_value = "sines")]
+        profile: String,
+        /// Duration, e.g. 300s, 5min, 1h.
+        #[arg(long, default_value = "300s")]
+        duration: String,
+        /// Sampling rate, e.g. 100Hz, 1kHz.
+        #[arg(long, default_value = "100Hz")]
+        rate: String,
+        /// Random seed (noise and step levels).
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Inertia m in N s^2/mm.
+        #[arg(long, default_value_t = 2e-3)]
+        m: f64,
+        /// Coulomb friction d0 in N.
+        #[arg(long, default_value_t = 0.0)]
+        d0: f64,
+        /// Linear damping d1 in N s/mm.
+        #[arg(long, default_value_t = 0.02)]
+        d1: f64,
+        /// Cubic damping d2 in N s^3/mm^3.
+        #[arg(long, default_value_t = -2e-5, allow_hyphen_values = true)]
+        d2: f64,
+        /// Force noise variance in N^2 (the paper's 0.017).
+        #[arg(long, default_value_t = 0.017)]
+        force_variance: f64,
+        /// Position noise variance in mm^2 (the paper's 0.01).
+        #[arg(long, default_value_t = 0.01)]
+        position_variance: f64,
+    },
+    /// Sensor noise of a log recorded at rest: Allan variance of each channel, and allan.svg.
+    ///
+    /// Examples:
+    ///   camspring noise static.csv
+    ///   camspring noise static.csv --json > noise.json
+    ///   camspring noise rig.csv --time t:ms --force F:lbf --position x:in
+    #[command(verbatim_doc_comment)]
+    Noise {
+        /// Calibration log (CSV with a header).
+        log: PathBuf,
+        /// Allan plot to write (default allan.svg next to the log).
+        #[arg(long)]
+        svg: Option<PathBuf>,
+        /// Print the noise model as JSON on stdout.
+        #[arg(long)]
+        json: bool,
+        #[command(flatten)]
+        columns: Columns,
+    },
+    /// Identify m, d0, d1, d2, mu, F0 and k2 from a calibration log (paper section V).
+    ///
+    /// Examples:
+    ///   camspring identify out/paper/calib.csv
+    ///   camspring identify calib.csv --noise noise.json --json
+    ///   camspring identify rig.csv --time t:ms --force F:lbf --position x:in
+    #[command(verbatim_doc_comment)]
+    Identify {
+        /// Calibration log (CSV with a header).
+        log: PathBuf,
+        /// Sensor noise from `camspring noise --json` (default: the paper's sensors).
+        #[arg(long)]
+        noise: Option<PathBuf>,
+        /// Force noise variance in N^2 (overrides --noise).
+        #[arg(long)]
+        force_variance: Option<f64>,
+        /// Position noise variance in mm^2 (overrides --noise).
+        #[arg(long)]
+        position_variance: Option<f64>,
+        /// Print the result as JSON on stdout.
+        #[arg(long)]
+        json: bool,
+        #[command(flatten)]
+        columns: Columns,
+    },
+}
+
+/// Column mapping of a calibration log.
+#[derive(clap::Args, Debug)]
+struct Columns {
+    /// Time column and unit (s, ms, us).
+    #[arg(long, default_value = "t_s")]
+    time: String,
+    /// Force column and unit (N, kN, lbf).
+    #[arg(long, default_value = "force_n")]
+    force: String,
+    /// Position column and unit (mm, m, in).
+    #[arg(long, default_value = "position_mm")]
+    position: String,
+    /// Allowed deviation of each sampling interval from the first, e.g. 10%.
+    #[arg(long, default_value = "10%")]
+    sampling_tolerance: String,
+}
+
+impl Columns {
+    fn parse(&self) -> Result<(ColumnMap, f64), camspring::Error> {
+        use camspring::units::Dimension;
+        let arg = |e: camspring::estimate::log::LogError| camspring::Error::Argument(e.to_string());
+        let map = ColumnMap {
+            time: parse_time_column(&self.time).map_err(arg)?,
+            force: parse_column(&self.force, Dimension::Force, "force").map_err(arg)?,
+            position: parse_column(&self.position, Dimension::Length, "position").map_err(arg)?,
+        };
+        let tol = parse_fraction(&self.sampling_tolerance)
+            .map_err(|e| camspring::Error::Argument(format!("--sampling-tolerance {e}")))?;
+        Ok((map, tol))
+    }
+}
+
+fn fail(e: &camspring::Error) -> ExitCode {
+    // Every message already carries its cause (key, line, OS error).
+    eprintln!("error: {e}");
+    ExitCode::from(if e.is_bad_input() {
+        EXIT_BAD_INPUT
+    } else {
+        EXIT_IO
+    })
+}
+
+fn print_json(v: &impl serde::Serialize) -> ExitCode {
+    match serde_json::to_string_pretty(v) {
+        Ok(s) => {
+            println!("{s}");
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("error: cannot encode the result: {e}");
+            ExitCode::from(EXIT_IO)
+        }
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn simulate(
+    spec: Option<PathBuf>,
+    out: Option<PathBuf>,
+    truth: Option<PathBuf>,
+    profile: &str,
+    duration: &str,
+    rate: &str,
+    seed: u64,
+    dynamics: Dynamics,
+    noise: Noise,
+) -> Result<camspring::run::SimulateRun, camspring::Error> {
+    let arg = camspring::Error::Argument;
+    let profile = match profile {
+        "sines" => Profile::Sines,
+        "ramp-hold" => Profile::RampHold,
+        "steps" => Profile::Steps,
+        "static" => Profile::Static,
+        other => {
+            return Err(arg(format!(
+                "--profile \"{other}\": expected sines, ramp-hold, steps or static"
+            )))
+        }
+    };
+    let settings = SimSettings {
+        profile,
+        duration_s: parse_duration_s(duration).map_err(|e| arg(format!("--duration {e}")))?,
+        rate_hz: parse_rate_hz(rate).map_err(|e| arg(format!("--rate {e}")))?,
+        seed,
+        dynamics,
+        noise,
+    };
+    run_simulate(
+        spec.as_deref(),
+        &SimulateOptions {
+            settings,
+            log_path: out,
+            truth_path: truth,
+        },
+    )
 }
 
 fn main() -> ExitCode {
@@ -56,15 +257,112 @@ fn main() -> ExitCode {
                 }
                 ExitCode::from(run.exit_code())
             }
-            Err(e) => {
-                // Every message already carries its cause (key, line, OS error).
-                eprintln!("error: {e}");
-                ExitCode::from(if e.is_bad_input() {
-                    EXIT_BAD_INPUT
-                } else {
-                    EXIT_IO
-                })
-            }
+            Err(e) => fail(&e),
         },
+        Command::Simulate {
+            spec,
+            out,
+            truth,
+            profile,
+            duration,
+            rate,
+            seed,
+            m,
+            d0,
+            d1,
+            d2,
+            force_variance,
+            position_variance,
+        } => {
+            let dynamics = Dynamics {
+                m_n_s2_per_mm: m,
+                d0_n: d0,
+                d1_n_s_per_mm: d1,
+                d2_n_s3_per_mm3: d2,
+            };
+            let noise = Noise {
+                force_variance_n2: force_variance,
+                position_variance_mm2: position_variance,
+            };
+            match simulate(
+                spec, out, truth, &profile, &duration, &rate, seed, dynamics, noise,
+            ) {
+                Ok(run) => {
+                    println!(
+                        "simulated {} samples of F = {:.6} N * exp({:.6} /mm * x) + {:.6} N",
+                        run.samples, run.law.mu_n, run.law.k2_per_mm, run.law.f0_n
+                    );
+                    println!("  log:   {}", run.log_path.display());
+                    println!("  truth: {}", run.truth_path.display());
+                    ExitCode::SUCCESS
+                }
+                Err(e) => fail(&e),
+            }
+        }
+        Command::Noise {
+            log,
+            svg,
+            json,
+            columns,
+        } => {
+            let run = columns
+                .parse()
+                .and_then(|(map, tol)| run_noise(&log, &map, tol, svg.as_deref()));
+            match run {
+                Ok(run) if json => print_json(&noise_json(&run.model)),
+                Ok(run) => {
+                    print!("{}", format_noise(&run.model));
+                    println!("  plot: {}", run.svg_path.display());
+                    ExitCode::SUCCESS
+                }
+                Err(e) => fail(&e),
+            }
+        }
+        Command::Identify {
+            log,
+            noise,
+            force_variance,
+            position_variance,
+            json,
+            columns,
+        } => {
+            let run = (|| {
+                let (map, tol) = columns.parse()?;
+                let mut sensor = match &noise {
+                    Some(p) => load_noise_json(p)?,
+                    None => SensorNoise::default(),
+                };
+                for (v, name) in [
+                    (force_variance, "--force-variance"),
+                    (position_variance, "--position-variance"),
+                ] {
+                    if let Some(v) = v {
+                        if !(v.is_finite() && v >= 0.0) {
+                            return Err(camspring::Error::Argument(format!(
+                                "{name} {v}: expected a variance >= 0"
+                            )));
+                        }
+                    }
+                }
+                if let Some(v) = force_variance {
+                    sensor.force_variance_n2 = v;
+                }
+                if let Some(v) = position_variance {
+                    sensor.position_variance_mm2 = v;
+                }
+                let (id, log) = run_identify(&log, &map, tol, &sensor)?;
+                Ok((id, log, sensor))
+            })();
+            match run {
+                Ok((id, log, sensor)) if json => {
+                    print_json(&identification_json(&id, &sensor, &log))
+                }
+                Ok((id, _, _)) => {
+                    print!("{}", format_identification(&id));
+                    ExitCode::SUCCESS
+                }
+                Err(e) => fail(&e),
+            }
+        }
     }
 }

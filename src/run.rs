@@ -184,3 +184,176 @@ pub fn format_design(run: &DesignRun) -> String {
     }
     o
 }
+
+/// Options of `camspring simulate`.
+#[derive(Debug, Clone)]
+pub struct SimulateOptions {
+    /// The run: profile, duration, rate, seed, dynamics, noise.
+    pub settings: crate::estimate::sim::SimSettings,
+    /// Where the log goes (default `out/<spec name>/calib.csv`).
+    pub log_path: Option<PathBuf>,
+    /// Where the truth goes (default next to the log, `truth.json`).
+    pub truth_path: Option<PathBuf>,
+}
+
+/// What `camspring simulate` wrote.
+#[derive(Debug, Clone)]
+pub struct SimulateRun {
+    /// The log.
+    pub log_path: PathBuf,
+    /// The truth.
+    pub truth_path: PathBuf,
+    /// Samples written.
+    pub samples: usize,
+    /// The spring law simulated.
+    pub law: crate::law::ExpLaw,
+}
+
+/// Runs `camspring simulate`: a calibration log of the spec's designed spring with known truth.
+pub fn run_simulate(spec_path: Option<&Path>, opts: &SimulateOptions) -> Result<SimulateRun> {
+    use crate::estimate::{log::write_log, sim::simulate};
+    let spec = load_spec(spec_path)?;
+    let law = crate::design::law_of(&spec)
+        .map_err(|e| Error::Design(e.into()))?
+        .law;
+    let xmax = spec.law.xmax_mm();
+    let (log, truth) = simulate(&law, xmax, law.force_n(xmax), &opts.settings)?;
+    let log_path = opts
+        .log_path
+        .clone()
+        .unwrap_or_else(|| Path::new("out").join(&spec.name).join("calib.csv"));
+    let truth_path = opts
+        .truth_path
+        .clone()
+        .unwrap_or_else(|| log_path.with_extension("truth.json"));
+    let truth_json = serde_json::to_vec(&truth).map_err(|e| Error::Encode {
+        what: "truth.json",
+        message: e.to_string(),
+    })?;
+    crate::export::write_atomic(&log_path, &write_log(&log))?;
+    crate::export::write_atomic(&truth_path, &truth_json)?;
+    Ok(SimulateRun {
+        log_path,
+        truth_path,
+        samples: log.len(),
+        law,
+    })
+}
+
+/// Reads a calibration log file, with a progress bar on stderr when `progress` is set and
+/// stderr is a terminal (never on a pipe or when `CI` is set).
+pub fn read_log_file(
+    path: &Path,
+    map: &crate::estimate::log::ColumnMap,
+    sampling_tolerance: f64,
+    progress: bool,
+) -> Result<crate::estimate::log::CalibrationLog> {
+    use std::io::IsTerminal;
+    let file = std::fs::File::open(path).map_err(|source| Error::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let size = file.metadata().map(|m| m.len()).unwrap_or(0);
+    let show = progress
+        && std::io::stderr().is_terminal()
+        && std::env::var_os("CI").is_none()
+        && size > 8 << 20;
+    let bar = show.then(|| {
+        let bar = indicatif::ProgressBar::new(size);
+        bar.set_style(
+            indicatif::ProgressStyle::with_template(
+                "reading {msg} {bar:40} {bytes}/{total_bytes} ({bytes_per_sec})",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        bar.set_message(path.display().to_string());
+        bar
+    });
+    let result = crate::estimate::log::read_log(
+        std::io::BufReader::with_capacity(1 << 20, file),
+        map,
+        sampling_tolerance,
+        |bytes| {
+            if let Some(b) = &bar {
+                b.set_position(bytes);
+            }
+        },
+    );
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    result.map_err(|source| Error::Log {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// What `camspring noise` found and wrote.
+#[derive(Debug, Clone)]
+pub struct NoiseRun {
+    /// The noise model.
+    pub model: crate::estimate::report::NoiseModel,
+    /// The Allan plot written.
+    pub svg_path: PathBuf,
+}
+
+/// Runs `camspring noise`: Allan variance of a log at rest, and `allan.svg`.
+pub fn run_noise(
+    log_path: &Path,
+    map: &crate::estimate::log::ColumnMap,
+    sampling_tolerance: f64,
+    svg_path: Option<&Path>,
+) -> Result<NoiseRun> {
+    use crate::estimate::report::{allan_svg, noise_model};
+    let log = read_log_file(log_path, map, sampling_tolerance, true)?;
+    let model = noise_model(&log);
+    let svg_path = svg_path.map(Path::to_path_buf).unwrap_or_else(|| {
+        log_path
+            .parent()
+            .unwrap_or(Path::new("."))
+            .join("allan.svg")
+    });
+    crate::export::write_atomic(&svg_path, allan_svg(&model).as_bytes())?;
+    Ok(NoiseRun { model, svg_path })
+}
+
+/// Reads the sensor noise from a `camspring noise --json` file.
+pub fn load_noise_json(path: &Path) -> Result<crate::estimate::identify::SensorNoise> {
+    let text = std::fs::read_to_string(path).map_err(|source| Error::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let v: serde_json::Value = serde_json::from_str(&text)
+        .map_err(|e| Error::Argument(format!("--noise {}: not JSON: {e}", path.display())))?;
+    let get = |a: &str, b: &str| {
+        v.get(a)
+            .and_then(|c| c.get(b))
+            .and_then(|x| x.as_f64())
+            .filter(|x| x.is_finite() && *x > 0.0)
+            .ok_or_else(|| {
+                Error::Argument(format!(
+                    "--noise {}: no positive {a}.{b}; expected the output of `camspring noise --json`",
+                    path.display()
+                ))
+            })
+    };
+    Ok(crate::estimate::identify::SensorNoise {
+        force_variance_n2: get("force", "white_noise_variance_n2")?,
+        position_variance_mm2: get("position", "white_noise_variance_mm2")?,
+    })
+}
+
+/// Runs `camspring identify` on a log file.
+pub fn run_identify(
+    log_path: &Path,
+    map: &crate::estimate::log::ColumnMap,
+    sampling_tolerance: f64,
+    noise: &crate::estimate::identify::SensorNoise,
+) -> Result<(
+    crate::estimate::identify::Identification,
+    crate::estimate::log::CalibrationLog,
+)> {
+    let log = read_log_file(log_path, map, sampling_tolerance, true)?;
+    let id = crate::estimate::identify::identify(&log, noise)?;
+    Ok((id, log))
+}

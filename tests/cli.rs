@@ -263,3 +263,122 @@ fn rerunning_replaces_outputs_atomically() {
         "deterministic output"
     );
 }
+
+#[test]
+fn simulate_noise_and_identify_work_end_to_end() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let out = camspring(
+        d,
+        &[
+            "simulate",
+            "-o",
+            "calib.csv",
+            "--truth",
+            "truth.json",
+            "--duration",
+            "120s",
+            "--seed",
+            "7",
+            "--profile",
+            "steps",
+        ],
+    );
+    assert_eq!(out.status.code(), Some(0));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("12000 samples"));
+    let truth: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("truth.json")).unwrap()).unwrap();
+    assert_eq!(truth["sigma_n_per_mm"].as_array().unwrap().len(), 12000);
+
+    let out = camspring(d, &["identify", "calib.csv", "--json"]);
+    assert_eq!(out.status.code(), Some(0));
+    let id: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let p = &id["parameters"];
+    for key in [
+        "k2_per_mm",
+        "mu_n",
+        "f0_n",
+        "m_n_s2_per_mm",
+        "d0_n",
+        "d1_n_s_per_mm",
+        "d2_n_s3_per_mm3",
+    ] {
+        let v = p[key].as_f64().unwrap_or_else(|| panic!("{key}"));
+        let s = p[format!("{key}_std")].as_f64().unwrap();
+        let t = match key {
+            "k2_per_mm" | "mu_n" | "f0_n" => truth["law"][key].as_f64().unwrap(),
+            _ => truth["dynamics"][key].as_f64().unwrap(),
+        };
+        assert!((v - t).abs() < 3.0 * s, "{key}: {v} +- {s} against {t}");
+    }
+
+    // Noise from a log at rest, then identification with that noise model.
+    assert_eq!(
+        camspring(
+            d,
+            &[
+                "simulate",
+                "--profile",
+                "static",
+                "--duration",
+                "200s",
+                "-o",
+                "static.csv"
+            ]
+        )
+        .status
+        .code(),
+        Some(0)
+    );
+    assert!(d.join("static.truth.json").exists());
+    let out = camspring(d, &["noise", "static.csv", "--json"]);
+    assert_eq!(out.status.code(), Some(0));
+    std::fs::write(d.join("noise.json"), &out.stdout).unwrap();
+    let noise: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let vf = noise["force"]["white_noise_variance_n2"].as_f64().unwrap();
+    assert!((vf / 0.017 - 1.0).abs() < 0.1, "{vf}");
+    let svg = std::fs::read_to_string(d.join("allan.svg")).unwrap();
+    assert!(svg.contains("<svg") && svg.contains("averaging time tau (s)"));
+    let out = camspring(d, &["identify", "calib.csv", "--noise", "noise.json"]);
+    assert_eq!(out.status.code(), Some(0));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("k2  ="));
+}
+
+#[test]
+fn bad_logs_and_options_exit_two_with_the_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let mut text = String::from("t_s,force_n,position_mm\n");
+    for i in 0..100 {
+        text.push_str(&format!("{:.2},{},{}\n", i as f64 * 0.01, 10, 1));
+    }
+    std::fs::write(
+        d.join("bad.csv"),
+        text.replacen("0.50,10,1", "0.50,ten,1", 1),
+    )
+    .unwrap();
+    for cmd in ["identify", "noise"] {
+        let out = camspring(d, &[cmd, "bad.csv"]);
+        assert_eq!(out.status.code(), Some(2));
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            err.contains("bad.csv") && err.contains("line 52") && err.contains("\"ten\""),
+            "{err}"
+        );
+    }
+    let out = camspring(d, &["identify", "missing.csv"]);
+    assert_eq!(out.status.code(), Some(2));
+    let out = camspring(d, &["identify", "bad.csv", "--force", "F:furlong"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("furlong"));
+    let out = camspring(d, &["simulate", "--duration", "soon"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--duration"));
+    let out = camspring(d, &["simulate", "--profile", "zigzag"]);
+    assert_eq!(out.status.code(), Some(2));
+    // A profile the wire cannot follow (pushing force) is refused, and nothing is written.
+    let out = camspring(d, &["simulate", "--d1", "50", "-o", "push.csv"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("wire only pulls"));
+    assert!(!d.join("push.csv").exists());
+}

@@ -448,6 +448,7 @@ pub fn profile_svg(design: &Design) -> String {
         ],
         circles,
         equal_aspect: true,
+        log_axes: false,
     };
     plot::document(&[panel], 760.0, 560.0).to_string()
 }
@@ -556,6 +557,7 @@ pub fn toolpath_svg(design: &Design, part: &Part, passes: &[toolpath::Pass]) -> 
         y_label: "y (mm)".into(),
         series,
         equal_aspect: true,
+        log_axes: false,
         ..Panel::default()
     };
     plot::document(&[panel], 820.0, 640.0).to_string()

@@ -32,6 +32,8 @@ pub struct Panel {
     pub circles: Vec<(f64, f64, f64)>,
     /// Same scale on both axes.
     pub equal_aspect: bool,
+    /// The data are log10 of the plotted quantities: ticks fall on decades and read 1e-2, 1e-1, ...
+    pub log_axes: bool,
 }
 
 /// Tick spacing of 1, 2 or 5 times a power of ten giving about `target` ticks.
@@ -87,6 +89,14 @@ fn bounds(panel: &Panel) -> (f64, f64, f64, f64) {
     b
 }
 
+fn fmt_axis_tick(v: f64, step: f64, log: bool) -> String {
+    if log {
+        format!("1e{}", v.round() as i64)
+    } else {
+        fmt_tick(v, step)
+    }
+}
+
 fn fmt_tick(v: f64, step: f64) -> String {
     let decimals = (-step.log10().floor()).max(0.0) as usize;
     // Snap to the tick grid so that -0.0 and rounding residue print as "0".
@@ -111,6 +121,10 @@ pub fn render_panel(panel: &Panel, x0: f64, y0: f64, w: f64, h: f64) -> Group {
         xs = step;
         ys = step;
     } else {
+        if panel.log_axes {
+            xs = xs.max(1.0).round();
+            ys = ys.max(1.0).round();
+        }
         xmin = (xmin / xs).floor() * xs;
         xmax = (xmax / xs).ceil() * xs;
         ymin = (ymin / ys).floor() * ys;
@@ -143,7 +157,7 @@ pub fn render_panel(panel: &Panel, x0: f64, y0: f64, w: f64, h: f64) -> Group {
                     .set("stroke", "#ddd"),
             )
             .add(
-                Text::new(fmt_tick(t, xs))
+                Text::new(fmt_axis_tick(t, xs, panel.log_axes))
                     .set("x", px(t))
                     .set("y", y0 + top + ph + 16.0)
                     .set("text-anchor", "middle"),
@@ -162,7 +176,7 @@ pub fn render_panel(panel: &Panel, x0: f64, y0: f64, w: f64, h: f64) -> Group {
                     .set("stroke", "#ddd"),
             )
             .add(
-                Text::new(fmt_tick(t, ys))
+                Text::new(fmt_axis_tick(t, ys, panel.log_axes))
                     .set("x", x0 + left - 6.0)
                     .set("y", py(t) + 4.0)
                     .set("text-anchor", "end"),

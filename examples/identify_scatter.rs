@@ -1,0 +1,98 @@
+//! Measures offline identification over many simulated logs: for each profile, the mean and
+//! spread of the z-scores (estimate - truth) / reported std of every parameter, and the worst
+//! relative error of k2 and mu. A spread near 1 means the reported std matches the scatter.
+//!
+//! Run: `cargo run --release --example identify_scatter [seeds] [seconds]` (default 20, 300).
+
+use camspring::estimate::identify::{identify, SensorNoise, PARAMS};
+use camspring::estimate::sim::{simulate, Dynamics, Noise, Profile, SimSettings};
+use camspring::spec::{Spec, DEFAULT_SPEC_TOML};
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<String> = std::env::args().collect();
+    let seeds: u64 = args.get(1).map_or(Ok(20), |s| s.parse())?;
+    let seconds: f64 = args.get(2).map_or(Ok(300.0), |s| s.parse())?;
+    let spec = Spec::from_toml(DEFAULT_SPEC_TOML)?;
+    let law = camspring::design::law_of(&spec)?.law;
+    let xmax = spec.law.xmax_mm();
+    println!(
+        "{seeds} seeds x {seconds} s at 100 Hz, paper noise (force 0.017 N^2, position 0.01 mm^2)"
+    );
+    println!(
+        "| profile | d0 (N) | parameter | mean z | spread of z | max abs z | not identifiable |"
+    );
+    println!("| --- | --- | --- | --- | --- | --- | --- |");
+    for (profile, d0) in [
+        (Profile::Sines, 0.0),
+        (Profile::Sines, 0.3),
+        (Profile::Steps, 0.0),
+        (Profile::RampHold, 0.2),
+    ] {
+        let dynamics = Dynamics {
+            d0_n: d0,
+            ..Dynamics::default()
+        };
+        let truth = [
+            dynamics.m_n_s2_per_mm,
+            d0,
+            dynamics.d1_n_s_per_mm,
+            dynamics.d2_n_s3_per_mm3,
+            law.mu_n,
+            law.f0_n,
+            law.k2_per_mm,
+        ];
+        let mut z: Vec<Vec<f64>> = vec![Vec::new(); 7];
+        let mut missing = [0usize; 7];
+        let (mut worst_k2, mut worst_mu) = (0.0f64, 0.0f64);
+        for seed in 0..seeds {
+            let settings = SimSettings {
+                profile,
+                duration_s: seconds,
+                rate_hz: 100.0,
+                seed,
+                dynamics,
+                noise: Noise::default(),
+            };
+            let (log, _) = simulate(&law, xmax, law.force_n(xmax), &settings)?;
+            let id = identify(&log, &SensorNoise::default())?;
+            for (k, name) in PARAMS.iter().enumerate() {
+                match id.get(name).and_then(|e| e.value.zip(e.std)) {
+                    Some((v, s)) => z[k].push((v - truth[k]) / s),
+                    None => missing[k] += 1,
+                }
+            }
+            let rel = |k: usize| {
+                id.parameters[k]
+                    .1
+                    .value
+                    .map_or(f64::NAN, |v| v / truth[k] - 1.0)
+            };
+            worst_k2 = worst_k2.max(rel(6).abs());
+            worst_mu = worst_mu.max(rel(4).abs());
+        }
+        for (k, zk) in z.iter().enumerate() {
+            let n = zk.len() as f64;
+            let (mean, spread, max) = if zk.len() > 1 {
+                let mean = zk.iter().sum::<f64>() / n;
+                let sd = (zk.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+                (
+                    format!("{mean:+.2}"),
+                    format!("{sd:.2}"),
+                    format!("{:.2}", zk.iter().fold(0.0f64, |a, v| a.max(v.abs()))),
+                )
+            } else {
+                ("-".into(), "-".into(), "-".into())
+            };
+            println!(
+                "| {profile:?} | {d0} | {} | {mean} | {spread} | {max} | {}/{seeds} |",
+                PARAMS[k], missing[k]
+            );
+        }
+        println!(
+            "| {profile:?} | {d0} | worst k2 error {:.2} %, worst mu error {:.2} % | | | | |",
+            100.0 * worst_k2,
+            100.0 * worst_mu
+        );
+    }
+    Ok(())
+}

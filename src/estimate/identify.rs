@@ -1,0 +1,753 @@
+//! Offline identification (paper section V): k2 by non-linear least squares, then
+//! X = [m, d0, d1, d2, mu, F0] by weighted least squares (eqs. 16-18), then a joint refinement.
+//!
+//! 1. Position, velocity and acceleration come from cubic Savitzky-Golay kernels over about
+//!    0.4 s with mutually uncorrelated noise ([`super::sg`]).
+//! 2. k2: Gauss-Newton with backtracking line search on F = mu*exp(k2 x) + F0 over the
+//!    quasi-static samples (|xd| below 10 % of its maximum), started from the best of a
+//!    log-spaced grid of k2 with (mu, F0) solved linearly for each.
+//! 3. With k2 fixed, WLS on rows [xdd, sgn(xd), xd, xd^3, exp(k2 x), 1] gives X and the
+//!    paper's covariance (A^T R^-1 A)^-1. Each row's variance R is the force variance plus the
+//!    filtered position noise carried through the model (stiffness, damping and inertia times
+//!    the filtered noise of x, xd and xdd): effective-variance weights from the noise model.
+//! 4. A joint weighted Gauss-Newton over all seven parameters (with line search) refines k2
+//!    together with X.
+//!
+//! Samples whose filtered velocity is within three of its noise standard deviations of zero are
+//! left out of steps 3 and 4: their friction sign is unknown (at rest, static friction is
+//! anywhere in +-d0), and guessing it biases d0 and d1.
+//!
+//! Reported standard deviations: the smoothed position noise makes neighbouring residuals
+//! correlated over one filter window, so (A^T R^-1 A)^-1 is too optimistic (it assumes
+//! independent rows). The reported covariance is the sandwich H^-1 S H^-1 with S summed from
+//! the residual scores over lags up to one window (a truncated HAC estimate); it also carries
+//! any model error. The paper's matrix is reported as well, for comparison.
+//!
+//! Poor excitation: the normal matrix is scaled to unit diagonal. While its smallest eigenvalue
+//! is below [`IDENTIFIABILITY_LIMIT`] times the largest, the parameter dominating that
+//! eigenvector is removed and reported as not identifiable, instead of printed as a number.
+
+use nalgebra::{DMatrix, DVector, SMatrix, SVector, SymmetricEigen};
+use serde::Serialize;
+
+use super::log::CalibrationLog;
+use super::sg::Differentiator;
+
+/// Parameter names in model order (the JSON keys, with units).
+pub const PARAMS: [&str; 7] = [
+    "m_n_s2_per_mm",
+    "d0_n",
+    "d1_n_s_per_mm",
+    "d2_n_s3_per_mm3",
+    "mu_n",
+    "f0_n",
+    "k2_per_mm",
+];
+
+/// The order in which [`prune`] gives up parameters that share a near-null direction:
+/// m, d0, d2, d1, then F0, mu, k2.
+const DROP_ORDER: [usize; 7] = [0, 1, 3, 2, 5, 4, 6];
+
+/// Smallest share of the information on m that must be signal rather than acceleration noise
+/// for m to count as identifiable.
+pub const MIN_INERTIA_SIGNAL_SHARE: f64 = 0.2;
+
+/// Smallest eigenvalue, relative to the largest, of the unit-diagonal normal matrix for which
+/// every parameter counts as identifiable (a condition number of 1e8).
+pub const IDENTIFIABILITY_LIMIT: f64 = 1e-8;
+
+/// Sensor noise used for the weights.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct SensorNoise {
+    /// Force variance (N^2).
+    pub force_variance_n2: f64,
+    /// Position variance (mm^2).
+    pub position_variance_mm2: f64,
+}
+
+impl Default for SensorNoise {
+    /// The paper's sensors: force 0.017 N^2, position 0.01 mm^2.
+    fn default() -> Self {
+        SensorNoise {
+            force_variance_n2: 0.017,
+            position_variance_mm2: 0.01,
+        }
+    }
+}
+
+/// One identified parameter.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Estimate {
+    /// Value (None when not identifiable from this log).
+    pub value: Option<f64>,
+    /// Standard deviation (sandwich covariance).
+    pub std: Option<f64>,
+}
+
+/// The result of [`identify`].
+#[derive(Debug, Clone, Serialize)]
+pub struct Identification {
+    /// Parameters by their unit-bearing names, in [`PARAMS`] order.
+    pub parameters: Vec<(String, Estimate)>,
+    /// Parameters this log cannot identify.
+    pub not_identifiable: Vec<String>,
+    /// k2 from the quasi-static stage alone (1/mm).
+    pub k2_quasi_static_per_mm: f64,
+    /// Covariance of the identifiable parameters, in [`PARAMS`] order (sandwich estimate).
+    pub covariance: Vec<Vec<f64>>,
+    /// The paper's (A^T R^-1 A)^-1 with k2 fixed, for the identifiable ones of X = [m, d0, d1, d2, mu, F0].
+    pub paper_covariance_k2_fixed: Vec<Vec<f64>>,
+    /// Names of the rows and columns of [`Self::covariance`].
+    pub covariance_parameters: Vec<String>,
+    /// How [`Self::covariance`] was estimated.
+    pub covariance_method: CovarianceMethod,
+    /// Condition number of the unit-diagonal normal matrix of the final fit.
+    pub condition_number: f64,
+    /// Reduced chi-square of the final fit with the noise model's weights (about 1 when the
+    /// noise model and the dynamic model are right).
+    pub reduced_chi2: f64,
+    /// RMS force residual (N).
+    pub residual_rms_n: f64,
+    /// Samples in the log.
+    pub samples: usize,
+    /// Samples used in the dynamic fit.
+    pub dynamic_samples: usize,
+    /// Quasi-static samples used for the k2 stage.
+    pub quasi_static_samples: usize,
+    /// Savitzky-Golay window (samples).
+    pub sg_window: usize,
+    /// Savitzky-Golay window (s).
+    pub sg_window_s: f64,
+}
+
+impl Identification {
+    /// The estimate of a parameter by name.
+    pub fn get(&self, name: &str) -> Option<Estimate> {
+        self.parameters
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, e)| *e)
+    }
+}
+
+/// Why identification failed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum IdentifyError {
+    /// Produced by [`identify`] when the log does not move the spring enough.
+    #[error(
+        "the filtered position varies by only {range_mm:.4} mm (position noise {noise_mm:.4} mm): this log \
+         does not excite the spring, so k2, mu and F0 cannot be identified; record a run over the stroke"
+    )]
+    NoExcitation {
+        /// Range of the filtered position.
+        range_mm: f64,
+        /// Position noise standard deviation.
+        noise_mm: f64,
+    },
+    /// Produced by [`identify`] when too few samples move clearly.
+    #[error(
+        "only {found} samples move faster than the velocity noise ({band_mm_s:.4} mm/s); at least {needed} \
+         are needed for the dynamic fit: record a run with motion"
+    )]
+    TooLittleMotion {
+        /// Moving samples.
+        found: usize,
+        /// Needed.
+        needed: usize,
+        /// The velocity band (mm/s).
+        band_mm_s: f64,
+    },
+    /// Produced by [`identify`] when the log is shorter than the filter window.
+    #[error(
+        "the log has {found} samples; the {window}-sample filter window needs at least {needed}"
+    )]
+    TooShort {
+        /// Samples.
+        found: usize,
+        /// Window.
+        window: usize,
+        /// Needed.
+        needed: usize,
+    },
+    /// Produced by [`identify`] when Gauss-Newton cannot reduce the residual.
+    #[error("the non-linear fit did not converge ({0})")]
+    NoConvergence(String),
+}
+
+struct Rows {
+    /// Sample index of each row (for residual correlation).
+    index: Vec<usize>,
+    x: Vec<f64>,
+    xd: Vec<f64>,
+    xdd: Vec<f64>,
+    f: Vec<f64>,
+    sgn: Vec<f64>,
+    var_x: f64,
+    var_xd: f64,
+    var_xdd: f64,
+    var_f: f64,
+}
+
+impl Rows {
+    fn subset(&self, keep: &[usize], dynamic: bool) -> Rows {
+        let pick = |v: &Vec<f64>| keep.iter().map(|&i| v[i]).collect::<Vec<f64>>();
+        let zero = vec![0.0; keep.len()];
+        Rows {
+            index: keep.iter().map(|&i| self.index[i]).collect(),
+            x: pick(&self.x),
+            xd: if dynamic {
+                pick(&self.xd)
+            } else {
+                zero.clone()
+            },
+            xdd: if dynamic {
+                pick(&self.xdd)
+            } else {
+                zero.clone()
+            },
+            f: pick(&self.f),
+            sgn: if dynamic { pick(&self.sgn) } else { zero },
+            var_x: self.var_x,
+            var_xd: if dynamic { self.var_xd } else { 0.0 },
+            var_xdd: if dynamic { self.var_xdd } else { 0.0 },
+            var_f: self.var_f,
+        }
+    }
+}
+
+type V7 = SVector<f64, 7>;
+type M7 = SMatrix<f64, 7, 7>;
+type Active = [bool; 7];
+
+/// Model force and Jacobian row for parameters p = [m, d0, d1, d2, mu, F0, k2].
+fn model(p: &V7, r: &Rows, i: usize) -> (f64, V7) {
+    let e = (p[6] * r.x[i]).exp();
+    let xd3 = r.xd[i].powi(3);
+    let row = V7::from([r.xdd[i], r.sgn[i], r.xd[i], xd3, e, 1.0, p[4] * r.x[i] * e]);
+    let f = p[0] * r.xdd[i] + p[1] * r.sgn[i] + p[2] * r.xd[i] + p[3] * xd3 + p[4] * e + p[5];
+    (f, row)
+}
+
+/// Effective variance of a row's force residual at parameters p.
+fn row_variance(p: &V7, r: &Rows, i: usize) -> f64 {
+    let stiffness = p[6] * p[4] * (p[6] * r.x[i]).exp();
+    let damping = p[2] + 3.0 * p[3] * r.xd[i] * r.xd[i];
+    r.var_f
+        + stiffness * stiffness * r.var_x
+        + damping * damping * r.var_xd
+        + p[0] * p[0] * r.var_xdd
+}
+
+fn weights_at(p: &V7, r: &Rows) -> Vec<f64> {
+    (0..r.f.len())
+        .map(|i| 1.0 / row_variance(p, r, i).max(1e-300))
+        .collect()
+}
+
+fn masked(mut row: V7, active: &Active) -> V7 {
+    for k in 0..7 {
+        if !active[k] {
+            row[k] = 0.0;
+        }
+    }
+    row
+}
+
+/// Per-row noise variance of the regressors that need the errors-in-variables correction:
+/// only xdd (for m). Its noise is uncorrelated with every other regressor's ([`super::sg`]),
+/// and the velocity noise is a few tenths of a percent of the velocity's spread, so the
+/// attenuation of d1 and d2 is far below their standard deviations.
+fn regressor_noise(r: &Rows, active: &Active) -> V7 {
+    let mut c = V7::zeros();
+    c[0] = r.var_xdd;
+    masked(c, active)
+}
+
+/// The noise part C = sum_i w_i diag(regressor noise variances) of the normal matrix.
+fn correction(r: &Rows, active: &Active, weights: &[f64]) -> M7 {
+    let wsum: f64 = weights.iter().sum();
+    M7::from_diagonal(&(regressor_noise(r, active) * wsum))
+}
+
+/// Share of the information on m (the inverse of its variance, other parameters free) that is
+/// left after removing the acceleration noise: 1 for noise-free accelerations, near or below
+/// zero when the log's accelerations are buried in the filtered position noise.
+fn inertia_signal_share(jtj_corrected: &M7, c: &M7, active: &Active) -> f64 {
+    if !active[0] {
+        return 1.0;
+    }
+    let raw = inverse(&(jtj_corrected + c), active).map_or(0.0, |h| 1.0 / h[(0, 0)]);
+    let signal = inverse(jtj_corrected, active).map_or(0.0, |h| 1.0 / h[(0, 0)]);
+    if raw > 0.0 && signal.is_finite() {
+        signal / raw
+    } else {
+        0.0
+    }
+}
+
+/// Removes what this log cannot identify: parameters in near-null directions of the normal
+/// matrix ([`prune`]) and m when less than [`MIN_INERTIA_SIGNAL_SHARE`] of its information
+/// is signal.
+fn prune_all(p: &mut V7, r: &Rows, active: &mut Active, weights: &[f64]) -> Vec<String> {
+    let (jtj, _, _) = normal(p, r, active, weights);
+    let c = correction(r, active, weights);
+    let mut removed = prune(&(jtj + c), active);
+    let (jtj, _, _) = normal(p, r, active, weights);
+    let c = correction(r, active, weights);
+    let share = inertia_signal_share(&jtj, &c, active);
+    if share < MIN_INERTIA_SIGNAL_SHARE {
+        active[0] = false;
+        removed.push(PARAMS[0].to_string());
+    }
+    drop_inactive(p, active);
+    removed
+}
+
+/// Corrected normal equations over the active parameters: (J^T W J - C, J^T W r + C p) and
+/// the corrected objective chi^2 - p^T C p, where C = sum_i w_i diag(var of each regressor).
+///
+/// The filtered acceleration carries noise of known variance; plain least squares would
+/// attenuate m by var(xdd) / (var(xdd) + noise) (errors in variables). Subtracting the noise
+/// part of the normal matrix (corrected least squares, Fuller 1987) removes that bias.
+fn normal(p: &V7, r: &Rows, active: &Active, weights: &[f64]) -> (M7, V7, f64) {
+    let mut jtj = M7::zeros();
+    let mut jtr = V7::zeros();
+    let mut chi2 = 0.0;
+    for (i, &w) in weights.iter().enumerate() {
+        let (f, row) = model(p, r, i);
+        let row = masked(row, active);
+        let res = r.f[i] - f;
+        jtj += row * row.transpose() * w;
+        jtr += row * (w * res);
+        chi2 += w * res * res;
+    }
+    let c = correction(r, active, weights);
+    let cp = c * p;
+    (jtj - c, jtr + cp, chi2 - p.dot(&cp))
+}
+
+/// Indices of the active parameters and the square roots of their diagonal entries.
+fn scaling(jtj: &M7, active: &Active) -> (Vec<usize>, Vec<f64>) {
+    let idx: Vec<usize> = (0..7).filter(|&k| active[k]).collect();
+    let d = idx
+        .iter()
+        .map(|&k| jtj[(k, k)].max(1e-300).sqrt())
+        .collect();
+    (idx, d)
+}
+
+/// The normal matrix over the active set, scaled to unit diagonal.
+fn scaled(jtj: &M7, active: &Active) -> DMatrix<f64> {
+    let (idx, d) = scaling(jtj, active);
+    DMatrix::from_fn(idx.len(), idx.len(), |a, b| {
+        jtj[(idx[a], idx[b])] / (d[a] * d[b])
+    })
+}
+
+/// Solves J^T W J dp = J^T W r over the active set.
+fn solve(jtj: &M7, jtr: &V7, active: &Active) -> Option<V7> {
+    let (idx, d) = scaling(jtj, active);
+    let b = DVector::from_iterator(idx.len(), idx.iter().zip(&d).map(|(&k, dk)| jtr[k] / dk));
+    let sol = scaled(jtj, active).cholesky()?.solve(&b);
+    let mut dp = V7::zeros();
+    for (a, &k) in idx.iter().enumerate() {
+        dp[k] = sol[a] / d[a];
+    }
+    Some(dp)
+}
+
+/// (J^T W J)^-1 over the active set (zeros elsewhere).
+fn inverse(jtj: &M7, active: &Active) -> Option<M7> {
+    let (idx, d) = scaling(jtj, active);
+    let inv = scaled(jtj, active).cholesky()?.inverse();
+    let mut c = M7::zeros();
+    for a in 0..idx.len() {
+        for b in 0..idx.len() {
+            c[(idx[a], idx[b])] = inv[(a, b)] / (d[a] * d[b]);
+        }
+    }
+    Some(c)
+}
+
+/// Removes, one at a time, the parameters that dominate near-null directions of the scaled
+/// normal matrix. Returns the names removed.
+fn prune(jtj: &M7, active: &mut Active) -> Vec<String> {
+    let mut removed = Vec::new();
+    while active.iter().any(|a| *a) {
+        let (idx, _) = scaling(jtj, active);
+        let eig = SymmetricEigen::new(scaled(jtj, active));
+        let (imin, lmin) =
+            eig.eigenvalues
+                .iter()
+                .enumerate()
+                .fold(
+                    (0, f64::INFINITY),
+                    |m, (i, &l)| if l < m.1 { (i, l) } else { m },
+                );
+        let lmax = eig.eigenvalues.iter().cloned().fold(0.0, f64::max);
+        if lmin > IDENTIFIABILITY_LIMIT * lmax && lmin > 0.0 {
+            break;
+        }
+        // Of the parameters that make up the near-null direction (at least half the largest
+        // component), drop the dynamic ones before the spring's: with a friction sign that never
+        // changes, d0 and F0 are the same column, and F0 is the one worth keeping.
+        let v = eig.eigenvectors.column(imin);
+        let vmax = v.iter().fold(0.0_f64, |m, c| m.max(c.abs()));
+        let k = DROP_ORDER
+            .iter()
+            .copied()
+            .find(|&k| {
+                idx.iter()
+                    .position(|&i| i == k)
+                    .is_some_and(|a| v[a].abs() >= 0.5 * vmax)
+            })
+            .unwrap_or(idx[0]);
+        active[k] = false;
+        removed.push(PARAMS[k].to_string());
+    }
+    removed
+}
+
+/// Zeroes the terms of X that were removed from the model (k2 keeps its last value).
+fn drop_inactive(p: &mut V7, active: &Active) {
+    for k in 0..6 {
+        if !active[k] {
+            p[k] = 0.0;
+        }
+    }
+}
+
+/// Weighted Gauss-Newton with backtracking line search; weights follow the parameters.
+/// A normal matrix that loses definiteness on the way (the corrected matrix of a barely
+/// excited parameter) removes that parameter, reported in the returned list.
+fn gauss_newton(
+    mut p: V7,
+    r: &Rows,
+    active: &mut Active,
+    iterations: usize,
+) -> Result<(V7, Vec<String>), IdentifyError> {
+    let mut weights = weights_at(&p, r);
+    let (mut jtj, mut jtr, mut chi2) = normal(&p, r, active, &weights);
+    let mut removed = Vec::new();
+    for _ in 0..iterations {
+        let Some(dp) = solve(&jtj, &jtr, active) else {
+            // Only m's column is corrected; if it made the matrix indefinite, m goes first.
+            let dropped = if active[0] {
+                active[0] = false;
+                vec![PARAMS[0].to_string()]
+            } else {
+                prune(&(jtj + correction(r, active, &weights)), active)
+            };
+            if dropped.is_empty() {
+                return Err(IdentifyError::NoConvergence(
+                    "singular normal matrix".into(),
+                ));
+            }
+            removed.extend(dropped);
+            drop_inactive(&mut p, active);
+            (jtj, jtr, chi2) = normal(&p, r, active, &weights);
+            continue;
+        };
+        // Converged when the full step would lower chi-square by less than 1e-8: far below
+        // any change in the estimates that their standard deviations could show.
+        if jtr.dot(&dp) < 1e-8 {
+            break;
+        }
+        let mut step = 1.0;
+        let mut improved = None;
+        for _ in 0..40 {
+            let trial = p + dp * step;
+            let (j2, r2, c2) = normal(&trial, r, active, &weights);
+            if c2.is_finite() && c2 <= chi2 {
+                improved = Some((trial, j2, r2, c2));
+                break;
+            }
+            step *= 0.5;
+        }
+        // No descent along the Gauss-Newton direction: at the minimum within rounding.
+        let Some((trial, _, _, c2)) = improved else {
+            break;
+        };
+        let rel = (chi2 - c2) / chi2.max(1e-300);
+        p = trial;
+        weights = weights_at(&p, r);
+        (jtj, jtr, chi2) = normal(&p, r, active, &weights);
+        if rel < 1e-12 && step == 1.0 {
+            break;
+        }
+    }
+    if p.iter().all(|v| v.is_finite()) {
+        Ok((p, removed))
+    } else {
+        Err(IdentifyError::NoConvergence("non-finite parameters".into()))
+    }
+}
+
+/// How the reported covariance was estimated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum CovarianceMethod {
+    /// Sandwich with residual correlations up to one filter window (the normal case).
+    Truncated,
+    /// Sandwich with Bartlett weights over two windows (when the truncated one is not
+    /// positive definite).
+    Bartlett,
+    /// (J^T W J)^-1 times the reduced chi-square (too few samples for either sandwich):
+    /// optimistic, because it ignores the correlation of neighbouring residuals.
+    Model,
+}
+
+/// Sandwich covariance H^-1 S H^-1, S summed from the residual scores g_i over all pairs of
+/// samples at most `lag` apart (a truncated HAC estimate, computed in O(n) with a sliding sum
+/// of the scores). If that is not positive definite, Bartlett weights over twice the lag
+/// (O(n lag)); if that fails too, the model covariance.
+fn sandwich(
+    p: &V7,
+    r: &Rows,
+    active: &Active,
+    weights: &[f64],
+    lag: usize,
+) -> Option<(M7, CovarianceMethod)> {
+    let (jtj, _, _) = normal(p, r, active, weights);
+    let hinv = inverse(&jtj, active)?;
+    let noise = regressor_noise(r, active);
+    let scores: Vec<V7> = (0..r.f.len())
+        .map(|i| {
+            let (f, row) = model(p, r, i);
+            (masked(row, active) * (r.f[i] - f) + noise.component_mul(p)) * weights[i]
+        })
+        .collect();
+    // Truncated kernel: S = sum_i g_i (sum_{|t_j - t_i| <= lag} g_j)^T.
+    let mut truncated = M7::zeros();
+    let (mut lo, mut hi) = (0usize, 0usize);
+    let mut window = V7::zeros();
+    for i in 0..scores.len() {
+        while hi < scores.len() && r.index[hi] <= r.index[i] + lag {
+            window += scores[hi];
+            hi += 1;
+        }
+        while r.index[lo] + lag < r.index[i] {
+            window -= scores[lo];
+            lo += 1;
+        }
+        truncated += scores[i] * window.transpose();
+    }
+    let truncated = (truncated + truncated.transpose()) * 0.5;
+    let positive = |c: &M7| {
+        let (idx, _) = scaling(c, active);
+        let sub = DMatrix::from_fn(idx.len(), idx.len(), |a, b| c[(idx[a], idx[b])]);
+        SymmetricEigen::new(sub)
+            .eigenvalues
+            .iter()
+            .all(|&l| l > 0.0)
+    };
+    let cov = hinv * truncated * hinv;
+    if positive(&cov) {
+        return Some((cov, CovarianceMethod::Truncated));
+    }
+    let mut bartlett = M7::zeros();
+    let wide = 2 * lag;
+    for i in 0..scores.len() {
+        bartlett += scores[i] * scores[i].transpose();
+        for j in i + 1..scores.len() {
+            let l = r.index[j] - r.index[i];
+            if l > wide {
+                break;
+            }
+            let c = scores[i] * scores[j].transpose() * (1.0 - l as f64 / (wide + 1) as f64);
+            bartlett += c + c.transpose();
+        }
+    }
+    let cov = hinv * bartlett * hinv;
+    if positive(&cov) {
+        return Some((cov, CovarianceMethod::Bartlett));
+    }
+    // Too few samples for either: the model's covariance, scaled by the reduced chi-square.
+    let (_, _, chi2) = normal(p, r, active, weights);
+    let dof = (r.f.len() as f64 - active.iter().filter(|a| **a).count() as f64).max(1.0);
+    let cov = hinv * (chi2 / dof).max(1.0);
+    positive(&cov).then_some((cov, CovarianceMethod::Model))
+}
+
+/// Identifies the transmission parameters from a calibration log.
+pub fn identify(
+    log: &CalibrationLog,
+    noise: &SensorNoise,
+) -> Result<Identification, IdentifyError> {
+    let dt = log.dt_s();
+    let diff = Differentiator::for_rate(1.0 / dt);
+    let h = diff.half;
+    if log.len() < 4 * diff.window() {
+        return Err(IdentifyError::TooShort {
+            found: log.len(),
+            window: diff.window(),
+            needed: 4 * diff.window(),
+        });
+    }
+    let x = diff.apply(&log.position_mm, dt, 0);
+    let xd = diff.apply(&log.position_mm, dt, 1);
+    let xdd = diff.apply(&log.position_mm, dt, 2);
+    let n = x.len();
+    let f = log.force_n[h..h + n].to_vec();
+    let var_x = diff.noise_variance(0, noise.position_variance_mm2, dt);
+    let var_xd = diff.noise_variance(1, noise.position_variance_mm2, dt);
+    let var_xdd = diff.noise_variance(2, noise.position_variance_mm2, dt);
+    let (lo, hi) = x
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    let noise_mm = noise.position_variance_mm2.sqrt();
+    let range_ok =
+        (hi - lo).partial_cmp(&(10.0 * noise_mm.max(1e-9))) == Some(std::cmp::Ordering::Greater);
+    if !range_ok {
+        return Err(IdentifyError::NoExcitation {
+            range_mm: hi - lo,
+            noise_mm,
+        });
+    }
+    let vmax = xd.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    let band = (3.0 * var_xd.sqrt()).max(1e-3 * vmax);
+    let sgn = xd
+        .iter()
+        .map(|&v| if v > 0.0 { 1.0 } else { -1.0 })
+        .collect();
+    let all = Rows {
+        index: (0..n).collect(),
+        x,
+        xd,
+        xdd,
+        f,
+        sgn,
+        var_x,
+        var_xd,
+        var_xdd,
+        var_f: noise.force_variance_n2,
+    };
+
+    // Stage 1: k2 on quasi-static samples, model mu*exp(k2 x) + F0.
+    let qs: Vec<usize> = (0..n).filter(|&i| all.xd[i].abs() <= 0.1 * vmax).collect();
+    let qs = if qs.len() >= 50 { qs } else { (0..n).collect() };
+    let qs_rows = all.subset(&qs, false);
+    let mut spring_only = [false, false, false, false, true, true, true];
+    let mut best = (f64::INFINITY, V7::zeros());
+    for g in 0..120 {
+        let k2 = 1e-4 * 10f64.powf(g as f64 * 5.0 / 119.0);
+        let mut a = SMatrix::<f64, 2, 2>::zeros();
+        let mut b = SVector::<f64, 2>::zeros();
+        for i in 0..qs_rows.f.len() {
+            let v = SVector::<f64, 2>::new((k2 * qs_rows.x[i]).exp(), 1.0);
+            a += v * v.transpose();
+            b += v * qs_rows.f[i];
+        }
+        if let Some(sol) = a.cholesky().map(|c| c.solve(&b)) {
+            let ssr: f64 = (0..qs_rows.f.len())
+                .map(|i| (qs_rows.f[i] - sol[0] * (k2 * qs_rows.x[i]).exp() - sol[1]).powi(2))
+                .sum();
+            if ssr.is_finite() && ssr < best.0 {
+                best = (ssr, V7::from([0.0, 0.0, 0.0, 0.0, sol[0], sol[1], k2]));
+            }
+        }
+    }
+    if !best.0.is_finite() {
+        return Err(IdentifyError::NoConvergence(
+            "no start for k2 on the quasi-static samples".into(),
+        ));
+    }
+    let (p1, _) = gauss_newton(best.1, &qs_rows, &mut spring_only, 100)?;
+
+    // Stage 2: the paper's WLS with k2 fixed, on the samples whose friction sign is known.
+    let moving: Vec<usize> = (0..n).filter(|&i| all.xd[i].abs() > band).collect();
+    let needed = 20 * 7;
+    if moving.len() < needed {
+        return Err(IdentifyError::TooLittleMotion {
+            found: moving.len(),
+            needed,
+            band_mm_s: band,
+        });
+    }
+    let rows = all.subset(&moving, true);
+    let mut active = [true, true, true, true, true, true, false];
+    let mut p = p1;
+    let mut not_identifiable = Vec::new();
+    for _ in 0..2 {
+        let weights = weights_at(&p, &rows);
+        not_identifiable.extend(prune_all(&mut p, &rows, &mut active, &weights));
+        // The WLS solution is one Gauss-Newton step from any start for linear parameters.
+        let (jtj, jtr, _) = normal(&p, &rows, &active, &weights);
+        let dp = solve(&jtj, &jtr, &active)
+            .ok_or_else(|| IdentifyError::NoConvergence("singular WLS normal matrix".into()))?;
+        p += dp;
+    }
+    let weights = weights_at(&p, &rows);
+    let (jtj2, _, _) = normal(&p, &rows, &active, &weights);
+    let paper = inverse(&jtj2, &active).unwrap_or_else(M7::zeros);
+    let idx2: Vec<usize> = (0..6).filter(|&k| active[k]).collect();
+    let paper_covariance_k2_fixed = idx2
+        .iter()
+        .map(|&a| idx2.iter().map(|&b| paper[(a, b)]).collect())
+        .collect();
+
+    // Stage 3: joint refinement with k2.
+    active[6] = true;
+    not_identifiable.extend(prune_all(&mut p, &rows, &mut active, &weights));
+    let (p, dropped) = gauss_newton(p, &rows, &mut active, 100)?;
+    not_identifiable.extend(dropped);
+    let weights = weights_at(&p, &rows);
+    let (jtj, _, _) = normal(&p, &rows, &active, &weights);
+    let m = rows.f.len();
+    let chi2: f64 = (0..m)
+        .map(|i| weights[i] * (rows.f[i] - model(&p, &rows, i).0).powi(2))
+        .sum();
+    let dof = (m - active.iter().filter(|a| **a).count()) as f64;
+    let (cov, covariance_method) = sandwich(&p, &rows, &active, &weights, diff.window())
+        .ok_or_else(|| IdentifyError::NoConvergence("singular covariance".into()))?;
+    let eig = SymmetricEigen::new(scaled(&jtj, &active)).eigenvalues;
+    let condition_number = eig.max() / eig.min().max(1e-300);
+    let rms = ((0..m)
+        .map(|i| (rows.f[i] - model(&p, &rows, i).0).powi(2))
+        .sum::<f64>()
+        / m as f64)
+        .sqrt();
+    let parameters = PARAMS
+        .iter()
+        .enumerate()
+        .map(|(k, name)| {
+            let e = if active[k] {
+                Estimate {
+                    value: Some(p[k]),
+                    std: Some(cov[(k, k)].sqrt()),
+                }
+            } else {
+                Estimate {
+                    value: None,
+                    std: None,
+                }
+            };
+            (name.to_string(), e)
+        })
+        .collect();
+    let idx: Vec<usize> = (0..7).filter(|&k| active[k]).collect();
+    not_identifiable.sort();
+    not_identifiable.dedup();
+    Ok(Identification {
+        parameters,
+        not_identifiable,
+        k2_quasi_static_per_mm: p1[6],
+        covariance: idx
+            .iter()
+            .map(|&a| idx.iter().map(|&b| cov[(a, b)]).collect())
+            .collect(),
+        paper_covariance_k2_fixed,
+        covariance_parameters: idx.iter().map(|&k| PARAMS[k].to_string()).collect(),
+        covariance_method,
+        condition_number,
+        reduced_chi2: chi2 / dof,
+        residual_rms_n: rms,
+        samples: log.len(),
+        dynamic_samples: m,
+        quasi_static_samples: qs_rows.f.len(),
+        sg_window: diff.window(),
+        sg_window_s: diff.window() as f64 * dt,
+    })
+}

@@ -1,0 +1,89 @@
+//! Calibration logs of a built spring: reading ([`log`]), simulating with known truth
+//! ([`sim`]), sensor noise by Allan variance ([`allan`]), smoothing differentiators ([`sg`]) and
+//! offline identification of the transmission parameters ([`identify`], paper sections IV-V).
+//! [`report`] turns the results into the JSON, text and SVG the commands write.
+
+pub mod allan;
+pub mod identify;
+pub mod log;
+pub mod report;
+pub mod sg;
+pub mod sim;
+
+/// Parses a duration such as "300s", "300 s", "5min", "1h", "250ms" or a plain number of seconds.
+pub fn parse_duration_s(text: &str) -> Result<f64, String> {
+    let t = text.trim();
+    let split = t.find(|c: char| c.is_ascii_alphabetic()).unwrap_or(t.len());
+    let (num, unit) = (t[..split].trim(), t[split..].trim());
+    let factor = match unit {
+        "" | "s" => 1.0,
+        "ms" => 1e-3,
+        "min" => 60.0,
+        "h" => 3600.0,
+        _ => {
+            return Err(format!(
+                "\"{text}\": unknown time unit \"{unit}\" (units: ms, s, min, h)"
+            ))
+        }
+    };
+    match num.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v * factor),
+        _ => Err(format!(
+            "\"{text}\": expected a positive duration such as \"300s\""
+        )),
+    }
+}
+
+/// Parses a rate such as "100Hz", "1 kHz" or a plain number of hertz.
+pub fn parse_rate_hz(text: &str) -> Result<f64, String> {
+    let t = text.trim();
+    let split = t.find(|c: char| c.is_ascii_alphabetic()).unwrap_or(t.len());
+    let (num, unit) = (t[..split].trim(), t[split..].trim());
+    let factor = match unit {
+        "" | "Hz" | "hz" => 1.0,
+        "kHz" | "khz" => 1e3,
+        _ => {
+            return Err(format!(
+                "\"{text}\": unknown rate unit \"{unit}\" (units: Hz, kHz)"
+            ))
+        }
+    };
+    match num.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v * factor),
+        _ => Err(format!(
+            "\"{text}\": expected a positive rate such as \"100Hz\""
+        )),
+    }
+}
+
+/// Parses a relative tolerance such as "10%" or "0.1".
+pub fn parse_fraction(text: &str) -> Result<f64, String> {
+    let t = text.trim();
+    let v = match t.strip_suffix('%') {
+        Some(p) => p.trim().parse::<f64>().map(|v| v / 100.0),
+        None => t.parse::<f64>(),
+    };
+    match v {
+        Ok(v) if v.is_finite() && v > 0.0 && v < 1.0 => Ok(v),
+        _ => Err(format!(
+            "\"{text}\": expected a fraction between 0 and 100 %, such as \"10%\""
+        )),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_durations_rates_and_fractions() {
+        assert_eq!(parse_duration_s("300s").unwrap(), 300.0);
+        assert_eq!(parse_duration_s("2 min").unwrap(), 120.0);
+        assert_eq!(parse_rate_hz("1kHz").unwrap(), 1000.0);
+        assert_eq!(parse_fraction("10%").unwrap(), 0.1);
+        assert!(parse_duration_s("-1s").is_err());
+        assert!(parse_duration_s("3 fortnights").is_err());
+        assert!(parse_rate_hz("NaN").is_err());
+        assert!(parse_fraction("150%").is_err());
+    }
+}

@@ -1,0 +1,263 @@
+//! Simulated calibration runs with known truth (physics.md section 4).
+//!
+//! A motor drives the deflection x(t) along a smooth profile; the rod force follows eq. (9):
+//! F = m*xdd + d1*xd + d2*xd^3 + d0*sgn(xd) + F_S(x), with the spec's designed law as F_S. The
+//! wire only pulls, so a profile that would need F < 0 (or more than 1.05 Fmax) is refused.
+//! White noise at the given variances (the paper's by default) is added to force and
+//! position. The truth (parameters, and sigma(t), D(t), M at every sample) is returned with
+//! the log.
+
+use rand::{rngs::StdRng, Rng, SeedableRng};
+use rand_distr::{Distribution, Normal};
+use serde::Serialize;
+
+use super::log::CalibrationLog;
+use crate::law::ExpLaw;
+
+/// The motion profile.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Profile {
+    /// Two superposed sines (0.15 Hz and 0.41 Hz) over 15 ... 85 % of the stroke.
+    Sines,
+    /// Slow ramps (4 s) between levels with 2 s holds: quasi-static.
+    RampHold,
+    /// Quick smoothed steps ([`STEP_RAMP_S`]) between random levels with 1.5 s holds.
+    Steps,
+    /// At rest at mid stroke (for noise models).
+    Static,
+}
+
+/// Transmission parameters besides the spring law (N, mm, s).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Dynamics {
+    /// Inertia m.
+    pub m_n_s2_per_mm: f64,
+    /// Coulomb friction d0.
+    pub d0_n: f64,
+    /// Linear damping d1.
+    pub d1_n_s_per_mm: f64,
+    /// Cubic damping d2 (negative: the damper saturates; keep |xd| < sqrt(d1/(3|d2|))).
+    pub d2_n_s3_per_mm3: f64,
+}
+
+impl Default for Dynamics {
+    fn default() -> Self {
+        Dynamics {
+            m_n_s2_per_mm: 2e-3,
+            d0_n: 0.0,
+            d1_n_s_per_mm: 0.02,
+            d2_n_s3_per_mm3: -2e-5,
+        }
+    }
+}
+
+/// White sensor noise (variances).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Noise {
+    /// Force variance (N^2); the paper's 0.017.
+    pub force_variance_n2: f64,
+    /// Position variance (mm^2); the paper's 0.01.
+    pub position_variance_mm2: f64,
+}
+
+impl Default for Noise {
+    fn default() -> Self {
+        Noise {
+            force_variance_n2: 0.017,
+            position_variance_mm2: 0.01,
+        }
+    }
+}
+
+/// Settings of one run.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct SimSettings {
+    /// Profile.
+    pub profile: Profile,
+    /// Duration.
+    pub duration_s: f64,
+    /// Sampling rate.
+    pub rate_hz: f64,
+    /// Random seed.
+    pub seed: u64,
+    /// Dynamics.
+    pub dynamics: Dynamics,
+    /// Noise.
+    pub noise: Noise,
+}
+
+/// The truth behind a simulated log.
+#[derive(Debug, Clone, Serialize)]
+pub struct Truth {
+    /// The spring law.
+    pub law: ExpLaw,
+    /// The other parameters.
+    pub dynamics: Dynamics,
+    /// Noise injected.
+    pub noise: Noise,
+    /// Settings.
+    pub settings: SimSettings,
+    /// Generalised stiffness sigma = dF/dx at each sample.
+    pub sigma_n_per_mm: Vec<f64>,
+    /// Generalised damping D = d1 + 3 d2 xd^2 at each sample.
+    pub d_n_s_per_mm: Vec<f64>,
+    /// Generalised inertia M (constant).
+    pub m_n_s2_per_mm: f64,
+    /// True (noise-free) deflection.
+    pub position_mm: Vec<f64>,
+    /// True force.
+    pub force_n: Vec<f64>,
+}
+
+/// Why a run could not be simulated.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SimError {
+    /// Produced by [`simulate`] when the profile needs a pushing force or too much force.
+    #[error(
+        "the {profile:?} profile needs a rod force of {force_n:.3} N at t = {t_s:.3} s, outside 0 ... {limit_n:.1} N \
+         (the wire only pulls); lower the damping or use a slower profile"
+    )]
+    ForceOutOfRange {
+        /// Profile.
+        profile: Profile,
+        /// Force needed.
+        force_n: f64,
+        /// When.
+        t_s: f64,
+        /// Upper limit.
+        limit_n: f64,
+    },
+    /// Produced by [`simulate`] for unusable settings.
+    #[error("{0}")]
+    Settings(String),
+}
+
+/// Duration of one move of the steps profile: a few filter windows, so that the smoothing
+/// differentiator follows it.
+pub const STEP_RAMP_S: f64 = 1.2;
+
+/// Quintic smootherstep on [0, 1] with its first two derivatives.
+fn smoother(u: f64) -> (f64, f64, f64) {
+    let u = u.clamp(0.0, 1.0);
+    (
+        u * u * u * (u * (6.0 * u - 15.0) + 10.0),
+        30.0 * u * u * (u - 1.0).powi(2),
+        60.0 * u * (2.0 * u * u - 3.0 * u + 1.0),
+    )
+}
+
+/// A sequence of smoothed moves between levels: (x, xd, xdd) at time t.
+fn moves(levels: &[f64], ramp: f64, hold: f64, t: f64) -> (f64, f64, f64) {
+    let period = ramp + hold;
+    let k = (t / period).floor() as usize;
+    let local = t - k as f64 * period;
+    let a = levels[k % levels.len()];
+    let b = levels[(k + 1) % levels.len()];
+    if local < hold {
+        return (a, 0.0, 0.0);
+    }
+    let (s, ds, dds) = smoother((local - hold) / ramp);
+    (
+        a + (b - a) * s,
+        (b - a) * ds / ramp,
+        (b - a) * dds / (ramp * ramp),
+    )
+}
+
+/// Simulates a calibration run of `law` over the stroke `xmax_mm` (force limit `fmax_n`).
+pub fn simulate(
+    law: &ExpLaw,
+    xmax_mm: f64,
+    fmax_n: f64,
+    s: &SimSettings,
+) -> Result<(CalibrationLog, Truth), SimError> {
+    if !(s.rate_hz > 0.0
+        && s.duration_s > 0.0
+        && s.duration_s * s.rate_hz >= 16.0
+        && s.duration_s * s.rate_hz <= 5e8)
+    {
+        return Err(SimError::Settings(format!(
+            "duration {} s at {} Hz gives {} samples; expected 16 to 5e8",
+            s.duration_s,
+            s.rate_hz,
+            s.duration_s * s.rate_hz
+        )));
+    }
+    let n = (s.duration_s * s.rate_hz).round() as usize;
+    let dt = 1.0 / s.rate_hz;
+    let mut rng = StdRng::seed_from_u64(s.seed);
+    let step_levels: Vec<f64> = (0..64)
+        .map(|_| xmax_mm * rng.random_range(0.15..0.85))
+        .collect();
+    let ramp_levels = [0.15, 0.5, 0.85, 0.3, 0.7, 0.2, 0.6].map(|f| f * xmax_mm);
+    let d = s.dynamics;
+    let force_noise = Normal::new(0.0, s.noise.force_variance_n2.sqrt())
+        .map_err(|e| SimError::Settings(e.to_string()))?;
+    let pos_noise = Normal::new(0.0, s.noise.position_variance_mm2.sqrt())
+        .map_err(|e| SimError::Settings(e.to_string()))?;
+    let mut log = CalibrationLog {
+        t_s: Vec::with_capacity(n),
+        force_n: Vec::with_capacity(n),
+        position_mm: Vec::with_capacity(n),
+    };
+    let mut truth = Truth {
+        law: *law,
+        dynamics: d,
+        noise: s.noise,
+        settings: *s,
+        sigma_n_per_mm: Vec::with_capacity(n),
+        d_n_s_per_mm: Vec::with_capacity(n),
+        m_n_s2_per_mm: d.m_n_s2_per_mm,
+        position_mm: Vec::with_capacity(n),
+        force_n: Vec::with_capacity(n),
+    };
+    let limit = 1.05 * fmax_n;
+    for i in 0..n {
+        let t = i as f64 * dt;
+        let (x, xd, xdd) = match s.profile {
+            Profile::Sines => {
+                let (w1, w2) = (std::f64::consts::TAU * 0.15, std::f64::consts::TAU * 0.41);
+                let (a1, a2) = (0.22 * xmax_mm, 0.13 * xmax_mm);
+                (
+                    0.5 * xmax_mm + a1 * (w1 * t).sin() + a2 * (w2 * t + 1.0).sin(),
+                    a1 * w1 * (w1 * t).cos() + a2 * w2 * (w2 * t + 1.0).cos(),
+                    -a1 * w1 * w1 * (w1 * t).sin() - a2 * w2 * w2 * (w2 * t + 1.0).sin(),
+                )
+            }
+            Profile::RampHold => moves(&ramp_levels, 4.0, 2.0, t),
+            Profile::Steps => moves(&step_levels, STEP_RAMP_S, 1.5, t),
+            Profile::Static => (0.5 * xmax_mm, 0.0, 0.0),
+        };
+        let sgn = if xd > 0.0 {
+            1.0
+        } else if xd < 0.0 {
+            -1.0
+        } else {
+            0.0
+        };
+        let f = d.m_n_s2_per_mm * xdd
+            + d.d1_n_s_per_mm * xd
+            + d.d2_n_s3_per_mm3 * xd.powi(3)
+            + d.d0_n * sgn
+            + law.force_n(x);
+        if !(0.0..=limit).contains(&f) {
+            return Err(SimError::ForceOutOfRange {
+                profile: s.profile,
+                force_n: f,
+                t_s: t,
+                limit_n: limit,
+            });
+        }
+        log.t_s.push(t);
+        log.force_n.push(f + force_noise.sample(&mut rng));
+        log.position_mm.push(x + pos_noise.sample(&mut rng));
+        truth.sigma_n_per_mm.push(law.stiffness_n_per_mm(x));
+        truth
+            .d_n_s_per_mm
+            .push(d.d1_n_s_per_mm + 3.0 * d.d2_n_s3_per_mm3 * xd * xd);
+        truth.position_mm.push(x);
+        truth.force_n.push(f);
+    }
+    Ok((log, truth))
+}
