@@ -1,0 +1,55 @@
+//! Criterion benchmarks of the calibration-log path: CSV parsing (MB/s) and offline
+//! identification of a 1-hour, 100 Hz log. Run with `cargo bench --bench calibration`;
+//! results go in docs/BENCHMARKS.md.
+
+use std::hint::black_box;
+
+use camspring::design::law_of;
+use camspring::estimate::identify::{identify, SensorNoise};
+use camspring::estimate::log::{read_log, write_log, ColumnMap};
+use camspring::estimate::report::noise_model;
+use camspring::estimate::sim::{simulate, Dynamics, Noise, Profile, SimSettings};
+use camspring::spec::{Spec, DEFAULT_SPEC_TOML};
+use criterion::{criterion_group, criterion_main, Criterion, Throughput};
+
+fn hour_log(profile: Profile) -> camspring::estimate::log::CalibrationLog {
+    let spec = Spec::from_toml(DEFAULT_SPEC_TOML).unwrap();
+    let law = law_of(&spec).unwrap().law;
+    let settings = SimSettings {
+        profile,
+        duration_s: 3600.0,
+        rate_hz: 100.0,
+        seed: 1,
+        dynamics: Dynamics::default(),
+        noise: Noise::default(),
+    };
+    simulate(&law, 20.0, law.force_n(20.0), &settings)
+        .unwrap()
+        .0
+}
+
+fn benches(c: &mut Criterion) {
+    let log = hour_log(Profile::Sines);
+    let bytes = write_log(&log);
+    let mut group = c.benchmark_group("log");
+    group.throughput(Throughput::Bytes(bytes.len() as u64));
+    group.sample_size(10);
+    group.bench_function("parse (1 h at 100 Hz, 360000 rows)", |b| {
+        b.iter(|| read_log(black_box(&bytes[..]), &ColumnMap::default(), 0.1, |_| {}).unwrap())
+    });
+    group.finish();
+
+    let mut group = c.benchmark_group("estimate");
+    group.sample_size(10);
+    group.bench_function("identify (1 h at 100 Hz, sines)", |b| {
+        b.iter(|| identify(black_box(&log), &SensorNoise::default()).unwrap())
+    });
+    let rest = hour_log(Profile::Static);
+    group.bench_function("noise model (1 h at 100 Hz, 3 channels)", |b| {
+        b.iter(|| noise_model(black_box(&rest)))
+    });
+    group.finish();
+}
+
+criterion_group!(calibration, benches);
+criterion_main!(calibration);
