@@ -382,3 +382,54 @@ fn bad_logs_and_options_exit_two_with_the_line() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("wire only pulls"));
     assert!(!d.join("push.csv").exists());
 }
+
+#[test]
+fn progress_bar_only_on_a_terminal() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // One hour at 100 Hz: 11 MB, above the 8 MB threshold of the progress bar.
+    let out = camspring(d, &["simulate", "--duration", "1h", "-o", "hour.csv"]);
+    assert_eq!(out.status.code(), Some(0));
+    assert!(d.join("hour.csv").metadata().unwrap().len() > 8 << 20);
+    // On a pipe: nothing but the result, even without CI set.
+    let piped = Command::new(env!("CARGO_BIN_EXE_camspring"))
+        .args(["noise", "hour.csv"])
+        .env_remove("CI")
+        .current_dir(d)
+        .output()
+        .unwrap();
+    assert_eq!(piped.status.code(), Some(0));
+    assert!(
+        piped.stderr.is_empty(),
+        "{}",
+        String::from_utf8_lossy(&piped.stderr)
+    );
+    // On a terminal (util-linux `script` gives the command a pseudo-terminal): a bar.
+    let tty = Command::new("script")
+        .args([
+            "-qec",
+            &format!("{} noise hour.csv", env!("CARGO_BIN_EXE_camspring")),
+            "/dev/null",
+        ])
+        .env_remove("CI")
+        .current_dir(d)
+        .output()
+        .expect("util-linux script");
+    let text = String::from_utf8_lossy(&tty.stdout);
+    assert!(
+        text.contains("reading hour.csv") && text.contains("MiB"),
+        "{text}"
+    );
+    // And with CI set, none even on a terminal.
+    let ci = Command::new("script")
+        .args([
+            "-qec",
+            &format!("{} noise hour.csv", env!("CARGO_BIN_EXE_camspring")),
+            "/dev/null",
+        ])
+        .env("CI", "true")
+        .current_dir(d)
+        .output()
+        .unwrap();
+    assert!(!String::from_utf8_lossy(&ci.stdout).contains("reading hour.csv"));
+}

@@ -153,6 +153,13 @@ pub fn format_noise(model: &NoiseModel) -> String {
             }
         );
     }
+    if model.channels[..2].iter().any(|c| c.fit.slope > -0.7) {
+        let _ = writeln!(
+            s,
+            "warning: force or position is not white noise over short averaging times (slope above \
+             -0.7): the log does not look like one recorded at rest; its variances include motion or drift"
+        );
+    }
     let _ = writeln!(
         s,
         "  force rate through the {}-sample differentiator (filtered, so not white; Allan slope {:+.2}): \
