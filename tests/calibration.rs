@@ -445,3 +445,20 @@ mod never_panics {
         }
     }
 }
+
+#[test]
+fn noise_model_of_the_simulators_default_moving_log_recovers_the_injected_variances() {
+    // The default run (sines): the motion adds a tau^2 term that the fit separates.
+    let (log, truth) = run(Profile::Sines, 300.0, 6, 0.0);
+    let sensor = noise_model(&log).sensor_noise();
+    assert!(
+        (sensor.force_variance_n2 / truth.noise.force_variance_n2 - 1.0).abs() < 0.1,
+        "{}",
+        sensor.force_variance_n2
+    );
+    assert!(
+        (sensor.position_variance_mm2 / truth.noise.position_variance_mm2 - 1.0).abs() < 0.1,
+        "{}",
+        sensor.position_variance_mm2
+    );
+}

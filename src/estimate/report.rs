@@ -109,6 +109,12 @@ pub fn noise_json(model: &NoiseModel) -> Value {
         }
         ch.insert(format!("sample_variance_{sq}"), json!(c.sample_variance));
         ch.insert("allan_slope".into(), json!(c.fit.slope));
+        if c.name != "force_rate" {
+            ch.insert(
+                format!("motion_coefficient_{sq}_per_s2"),
+                json!(c.fit.motion_coefficient_per_s2),
+            );
+        }
         ch.insert(
             "allan".into(),
             Value::Array(
@@ -156,8 +162,9 @@ pub fn format_noise(model: &NoiseModel) -> String {
     if model.channels[..2].iter().any(|c| c.fit.slope > -0.7) {
         let _ = writeln!(
             s,
-            "warning: force or position is not white noise over short averaging times (slope above \
-             -0.7): the log does not look like one recorded at rest; its variances include motion or drift"
+            "note: force or position is not white over the first decade (slope above -0.7): the log \
+             moves or drifts. The white-noise variances above are separated from a tau^2 motion term; \
+             a log recorded at rest is the cleaner measurement"
         );
     }
     let _ = writeln!(

@@ -2,7 +2,7 @@
 //!
 //! A motor drives the deflection x(t) along a smooth profile; the rod force follows eq. (9):
 //! F = m*xdd + d1*xd + d2*xd^3 + d0*sgn(xd) + F_S(x), with the spec's designed law as F_S. The
-//! wire only pulls, so a profile that would need F < 0 (or more than 1.05 Fmax) is refused.
+//! wire only pulls, so a profile that would need F < 0 (or more than Fmax) is refused.
 //! White noise at the given variances (the paper's by default) is added to force and
 //! position. The truth (parameters, and sigma(t), D(t), M at every sample) is returned with
 //! the log.
@@ -212,7 +212,7 @@ pub fn simulate(
         position_mm: Vec::with_capacity(n),
         force_n: Vec::with_capacity(n),
     };
-    let limit = 1.05 * fmax_n;
+    let limit = fmax_n;
     for i in 0..n {
         let t = i as f64 * dt;
         let (x, xd, xdd) = match s.profile {
