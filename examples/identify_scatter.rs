@@ -2,7 +2,8 @@
 //! spread of the z-scores (estimate - truth) / reported std of every parameter, and the worst
 //! relative error of k2 and mu. A spread near 1 means the reported std matches the scatter.
 //!
-//! Run: `cargo run --release --example identify_scatter [seeds] [seconds]` (default 20, 300).
+//! Run: `cargo run --release --example identify_scatter [seeds] [seconds] [m d1 d2]`
+//! (default 20, 300 and the simulator's default dynamics).
 
 use camspring::estimate::identify::{identify, SensorNoise, PARAMS};
 use camspring::estimate::sim::{simulate, Dynamics, Noise, Profile, SimSettings};
@@ -28,9 +29,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         (Profile::Steps, 0.0),
         (Profile::RampHold, 0.2),
     ] {
+        let base = Dynamics::default();
+        let arg = |i: usize, d: f64| args.get(i).and_then(|s| s.parse().ok()).unwrap_or(d);
         let dynamics = Dynamics {
+            m_n_s2_per_mm: arg(3, base.m_n_s2_per_mm),
             d0_n: d0,
-            ..Dynamics::default()
+            d1_n_s_per_mm: arg(4, base.d1_n_s_per_mm),
+            d2_n_s3_per_mm3: arg(5, base.d2_n_s3_per_mm3),
         };
         let truth = [
             dynamics.m_n_s2_per_mm,

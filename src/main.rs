@@ -3,7 +3,22 @@
 //! Exit codes: 0 done (warnings allowed), 1 a design check failed (outputs still written),
 //! 2 bad input (spec, arguments), 3 an output could not be written.
 
+use std::io::Write as _;
 use std::path::PathBuf;
+
+/// Writes to stdout; a closed pipe (`camspring ... | head`) is not an error worth a panic.
+macro_rules! out {
+    ($($arg:tt)*) => {{
+        let _ = write!(std::io::stdout().lock(), $($arg)*);
+    }};
+}
+
+/// Like `out!` with a newline.
+macro_rules! outln {
+    ($($arg:tt)*) => {{
+        let _ = writeln!(std::io::stdout().lock(), $($arg)*);
+    }};
+}
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
@@ -134,6 +149,9 @@ enum Command {
         /// Position noise variance in mm^2 (overrides --noise).
         #[arg(long)]
         position_variance: Option<f64>,
+        /// Savitzky-Golay window, e.g. 0.8s (default about 0.4 s); longer for slow runs.
+        #[arg(long)]
+        window: Option<String>,
         /// Print the result as JSON on stdout.
         #[arg(long)]
         json: bool,
@@ -187,7 +205,7 @@ fn fail(e: &camspring::Error) -> ExitCode {
 fn print_json(v: &impl serde::Serialize) -> ExitCode {
     match serde_json::to_string_pretty(v) {
         Ok(s) => {
-            println!("{s}");
+            outln!("{s}");
             ExitCode::SUCCESS
         }
         Err(e) => {
@@ -246,14 +264,14 @@ fn main() -> ExitCode {
             Ok(run) => {
                 if json {
                     match serde_json::to_string_pretty(&run.summary) {
-                        Ok(s) => println!("{s}"),
+                        Ok(s) => outln!("{s}"),
                         Err(e) => {
                             eprintln!("error: cannot encode the summary: {e}");
                             return ExitCode::from(EXIT_IO);
                         }
                     }
                 } else {
-                    print!("{}", format_design(&run));
+                    out!("{}", format_design(&run));
                 }
                 ExitCode::from(run.exit_code())
             }
@@ -288,12 +306,15 @@ fn main() -> ExitCode {
                 spec, out, truth, &profile, &duration, &rate, seed, dynamics, noise,
             ) {
                 Ok(run) => {
-                    println!(
+                    outln!(
                         "simulated {} samples of F = {:.6} N * exp({:.6} /mm * x) + {:.6} N",
-                        run.samples, run.law.mu_n, run.law.k2_per_mm, run.law.f0_n
+                        run.samples,
+                        run.law.mu_n,
+                        run.law.k2_per_mm,
+                        run.law.f0_n
                     );
-                    println!("  log:   {}", run.log_path.display());
-                    println!("  truth: {}", run.truth_path.display());
+                    outln!("  log:   {}", run.log_path.display());
+                    outln!("  truth: {}", run.truth_path.display());
                     ExitCode::SUCCESS
                 }
                 Err(e) => fail(&e),
@@ -311,8 +332,8 @@ fn main() -> ExitCode {
             match run {
                 Ok(run) if json => print_json(&noise_json(&run.model)),
                 Ok(run) => {
-                    print!("{}", format_noise(&run.model));
-                    println!("  plot: {}", run.svg_path.display());
+                    out!("{}", format_noise(&run.model));
+                    outln!("  plot: {}", run.svg_path.display());
                     ExitCode::SUCCESS
                 }
                 Err(e) => fail(&e),
@@ -323,11 +344,17 @@ fn main() -> ExitCode {
             noise,
             force_variance,
             position_variance,
+            window,
             json,
             columns,
         } => {
             let run = (|| {
                 let (map, tol) = columns.parse()?;
+                let window_s = window
+                    .as_deref()
+                    .map(parse_duration_s)
+                    .transpose()
+                    .map_err(|e| camspring::Error::Argument(format!("--window {e}")))?;
                 let mut sensor = match &noise {
                     Some(p) => load_noise_json(p)?,
                     None => SensorNoise::default(),
@@ -350,7 +377,7 @@ fn main() -> ExitCode {
                 if let Some(v) = position_variance {
                     sensor.position_variance_mm2 = v;
                 }
-                let (id, log) = run_identify(&log, &map, tol, &sensor)?;
+                let (id, log) = run_identify(&log, &map, tol, &sensor, window_s)?;
                 Ok((id, log, sensor))
             })();
             match run {
@@ -358,7 +385,7 @@ fn main() -> ExitCode {
                     print_json(&identification_json(&id, &sensor, &log))
                 }
                 Ok((id, _, _)) => {
-                    print!("{}", format_identification(&id));
+                    out!("{}", format_identification(&id));
                     ExitCode::SUCCESS
                 }
                 Err(e) => fail(&e),

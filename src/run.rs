@@ -349,11 +349,12 @@ pub fn run_identify(
     map: &crate::estimate::log::ColumnMap,
     sampling_tolerance: f64,
     noise: &crate::estimate::identify::SensorNoise,
+    window_s: Option<f64>,
 ) -> Result<(
     crate::estimate::identify::Identification,
     crate::estimate::log::CalibrationLog,
 )> {
     let log = read_log_file(log_path, map, sampling_tolerance, true)?;
-    let id = crate::estimate::identify::identify(&log, noise)?;
+    let id = crate::estimate::identify::identify_with_window(&log, noise, window_s)?;
     Ok((id, log))
 }

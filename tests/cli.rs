@@ -433,3 +433,25 @@ fn progress_bar_only_on_a_terminal() {
         .unwrap();
     assert!(!String::from_utf8_lossy(&ci.stdout).contains("reading hour.csv"));
 }
+
+#[test]
+fn a_closed_pipe_is_not_a_crash() {
+    // `camspring design | head -1`: stdout closes early; the command must not panic.
+    let dir = tempfile::tempdir().unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_camspring"))
+        .arg("design")
+        .current_dir(dir.path())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(!String::from_utf8_lossy(&out.stderr).contains("panicked"));
+}

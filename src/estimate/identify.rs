@@ -31,7 +31,7 @@ use nalgebra::{DMatrix, DVector, SMatrix, SVector, SymmetricEigen};
 use serde::Serialize;
 
 use super::log::CalibrationLog;
-use super::sg::Differentiator;
+use super::sg::{self, Differentiator};
 
 /// Parameter names in model order (the JSON keys, with units).
 pub const PARAMS: [&str; 7] = [
@@ -222,7 +222,7 @@ type Active = [bool; 7];
 /// Model force and Jacobian row for parameters p = [m, d0, d1, d2, mu, F0, k2].
 fn model(p: &V7, r: &Rows, i: usize) -> (f64, V7) {
     let e = (p[6] * r.x[i]).exp();
-    let xd3 = r.xd[i].powi(3);
+    let xd3 = unbiased_cube(r.xd[i], r.var_xd);
     let row = V7::from([r.xdd[i], r.sgn[i], r.xd[i], xd3, e, 1.0, p[4] * r.x[i] * e]);
     let f = p[0] * r.xdd[i] + p[1] * r.sgn[i] + p[2] * r.xd[i] + p[3] * xd3 + p[4] * e + p[5];
     (f, row)
@@ -253,20 +253,48 @@ fn masked(mut row: V7, active: &Active) -> V7 {
     row
 }
 
-/// Per-row noise variance of the regressors that need the errors-in-variables correction:
-/// only xdd (for m). Its noise is uncorrelated with every other regressor's ([`super::sg`]),
-/// and the velocity noise is a few tenths of a percent of the velocity's spread, so the
-/// attenuation of d1 and d2 is far below their standard deviations.
-fn regressor_noise(r: &Rows, active: &Active) -> V7 {
-    let mut c = V7::zeros();
-    c[0] = r.var_xdd;
-    masked(c, active)
+/// An unbiased estimate of v^3 from a noisy o = v + e with var(e) = s2: o^3 - 3 o s2.
+fn unbiased_cube(o: f64, s2: f64) -> f64 {
+    o * o * o - 3.0 * o * s2
 }
 
-/// The noise part C = sum_i w_i diag(regressor noise variances) of the normal matrix.
+/// The noise part of one row's normal-matrix contribution J^T J, over the regressors with
+/// noise: xdd (for m; noise var_xdd, uncorrelated with the others, see [`super::sg`]) and the
+/// velocity columns xd and xd^3 (the latter as [`unbiased_cube`]). For o = v + e with
+/// Gaussian e of variance s2, E[o^2] = v^2 + s2, E[o c3] = v^4 + 3 v^2 s2 and
+/// E[c3^2] = v^6 + 9 v^4 s2 + 18 v^2 s2^2 + 6 s2^3, where c3 = o^3 - 3 o s2; the
+/// powers of v are replaced by their unbiased estimates from o.
+fn row_correction(r: &Rows, i: usize, active: &Active) -> M7 {
+    let mut c = M7::zeros();
+    if active[0] {
+        c[(0, 0)] = r.var_xdd;
+    }
+    let s2 = r.var_xd;
+    if s2 > 0.0 {
+        let o2 = r.xd[i] * r.xd[i];
+        let v2 = o2 - s2;
+        let v4 = o2 * o2 - 6.0 * o2 * s2 + 3.0 * s2 * s2;
+        if active[2] {
+            c[(2, 2)] = s2;
+        }
+        if active[2] && active[3] {
+            c[(2, 3)] = 3.0 * v2 * s2;
+            c[(3, 2)] = c[(2, 3)];
+        }
+        if active[3] {
+            c[(3, 3)] = 9.0 * v4 * s2 + 18.0 * v2 * s2 * s2 + 6.0 * s2 * s2 * s2;
+        }
+    }
+    c
+}
+
+/// The noise part C = sum_i w_i C_i of the normal matrix.
 fn correction(r: &Rows, active: &Active, weights: &[f64]) -> M7 {
-    let wsum: f64 = weights.iter().sum();
-    M7::from_diagonal(&(regressor_noise(r, active) * wsum))
+    let mut c = M7::zeros();
+    for (i, &w) in weights.iter().enumerate() {
+        c += row_correction(r, i, active) * w;
+    }
+    c
 }
 
 /// Share of the information on m (the inverse of its variance, other parameters free) that is
@@ -286,8 +314,9 @@ fn inertia_signal_share(jtj_corrected: &M7, c: &M7, active: &Active) -> f64 {
 }
 
 /// Removes what this log cannot identify: parameters in near-null directions of the normal
-/// matrix ([`prune`]) and m when less than [`MIN_INERTIA_SIGNAL_SHARE`] of its information
-/// is signal.
+/// matrix ([`prune`]); m when less than [`MIN_INERTIA_SIGNAL_SHARE`] of its information is
+/// signal; and, while the noise-corrected normal matrix is not positive definite, the
+/// noise-corrected parameters in the order m, d2, d1 (their information is noise).
 fn prune_all(p: &mut V7, r: &Rows, active: &mut Active, weights: &[f64]) -> Vec<String> {
     let (jtj, _, _) = normal(p, r, active, weights);
     let c = correction(r, active, weights);
@@ -299,16 +328,27 @@ fn prune_all(p: &mut V7, r: &Rows, active: &mut Active, weights: &[f64]) -> Vec<
         active[0] = false;
         removed.push(PARAMS[0].to_string());
     }
+    for k in [0, 3, 2] {
+        let (jtj, _, _) = normal(p, r, active, weights);
+        if scaled(&jtj, active).cholesky().is_some() {
+            break;
+        }
+        if active[k] {
+            active[k] = false;
+            removed.push(PARAMS[k].to_string());
+        }
+    }
     drop_inactive(p, active);
     removed
 }
 
 /// Corrected normal equations over the active parameters: (J^T W J - C, J^T W r + C p) and
-/// the corrected objective chi^2 - p^T C p, where C = sum_i w_i diag(var of each regressor).
+/// the corrected objective chi^2 - p^T C p, where C = sum_i w_i C_i ([`row_correction`]).
 ///
-/// The filtered acceleration carries noise of known variance; plain least squares would
-/// attenuate m by var(xdd) / (var(xdd) + noise) (errors in variables). Subtracting the noise
-/// part of the normal matrix (corrected least squares, Fuller 1987) removes that bias.
+/// The filtered acceleration and velocity carry noise of known variance; plain least squares
+/// would attenuate m by var(xdd) / (var(xdd) + noise) and bias d1 and d2 (errors in
+/// variables). Subtracting the noise part of the normal matrix (corrected least squares,
+/// Fuller 1987) removes that bias.
 fn normal(p: &V7, r: &Rows, active: &Active, weights: &[f64]) -> (M7, V7, f64) {
     let mut jtj = M7::zeros();
     let mut jtr = V7::zeros();
@@ -431,13 +471,15 @@ fn gauss_newton(
     let mut removed = Vec::new();
     for _ in 0..iterations {
         let Some(dp) = solve(&jtj, &jtr, active) else {
-            // Only m's column is corrected; if it made the matrix indefinite, m goes first.
-            let dropped = if active[0] {
-                active[0] = false;
-                vec![PARAMS[0].to_string()]
-            } else {
-                prune(&(jtj + correction(r, active, &weights)), active)
-            };
+            // A structural null direction first; otherwise the corrected matrix lost
+            // definiteness through a noise-corrected column: m, then d2, then d1.
+            let mut dropped = prune(&(jtj + correction(r, active, &weights)), active);
+            if dropped.is_empty() {
+                if let Some(k) = [0, 3, 2].into_iter().find(|&k| active[k]) {
+                    active[k] = false;
+                    dropped.push(PARAMS[k].to_string());
+                }
+            }
             if dropped.is_empty() {
                 return Err(IdentifyError::NoConvergence(
                     "singular normal matrix".into(),
@@ -510,11 +552,10 @@ fn sandwich(
 ) -> Option<(M7, CovarianceMethod)> {
     let (jtj, _, _) = normal(p, r, active, weights);
     let hinv = inverse(&jtj, active)?;
-    let noise = regressor_noise(r, active);
     let scores: Vec<V7> = (0..r.f.len())
         .map(|i| {
             let (f, row) = model(p, r, i);
-            (masked(row, active) * (r.f[i] - f) + noise.component_mul(p)) * weights[i]
+            (masked(row, active) * (r.f[i] - f) + row_correction(r, i, active) * p) * weights[i]
         })
         .collect();
     // Truncated kernel: S = sum_i g_i (sum_{|t_j - t_i| <= lag} g_j)^T.
@@ -569,13 +610,28 @@ fn sandwich(
     positive(&cov).then_some((cov, CovarianceMethod::Model))
 }
 
-/// Identifies the transmission parameters from a calibration log.
+/// Identifies the transmission parameters from a calibration log, with the Savitzky-Golay
+/// window chosen from the sampling rate ([`super::sg::window_for_rate`], about 0.4 s).
 pub fn identify(
     log: &CalibrationLog,
     noise: &SensorNoise,
 ) -> Result<Identification, IdentifyError> {
+    identify_with_window(log, noise, None)
+}
+
+/// [`identify`] with the Savitzky-Golay window given in seconds (odd number of samples, at
+/// least 9). A longer window lowers the acceleration noise, which slow, quasi-static runs need
+/// for m; it must stay below about a third of the fastest move, or the filter distorts it.
+pub fn identify_with_window(
+    log: &CalibrationLog,
+    noise: &SensorNoise,
+    window_s: Option<f64>,
+) -> Result<Identification, IdentifyError> {
     let dt = log.dt_s();
-    let diff = Differentiator::for_rate(1.0 / dt);
+    let diff = match window_s {
+        Some(w) => Differentiator::new(((w / dt).round().clamp(0.0, 1e6) as usize) | 1),
+        None => Differentiator::for_rate(1.0 / dt),
+    };
     let h = diff.half;
     if log.len() < 4 * diff.window() {
         return Err(IdentifyError::TooShort {
@@ -584,14 +640,16 @@ pub fn identify(
             needed: 4 * diff.window(),
         });
     }
-    let x = diff.apply(&log.position_mm, dt, 0);
-    let xd = diff.apply(&log.position_mm, dt, 1);
-    let xdd = diff.apply(&log.position_mm, dt, 2);
+    let x = diff.apply(&log.position_mm, dt, sg::POSITION);
+    let xd = diff.apply(&log.position_mm, dt, sg::VELOCITY);
+    let xdd = diff.apply(&log.position_mm, dt, sg::ACCELERATION);
+    let motion = diff.apply(&log.position_mm, dt, sg::MOTION_VELOCITY);
     let n = x.len();
     let f = log.force_n[h..h + n].to_vec();
-    let var_x = diff.noise_variance(0, noise.position_variance_mm2, dt);
-    let var_xd = diff.noise_variance(1, noise.position_variance_mm2, dt);
-    let var_xdd = diff.noise_variance(2, noise.position_variance_mm2, dt);
+    let var_x = diff.noise_variance(sg::POSITION, noise.position_variance_mm2, dt);
+    let var_xd = diff.noise_variance(sg::VELOCITY, noise.position_variance_mm2, dt);
+    let var_xdd = diff.noise_variance(sg::ACCELERATION, noise.position_variance_mm2, dt);
+    let var_motion = diff.noise_variance(sg::MOTION_VELOCITY, noise.position_variance_mm2, dt);
     let (lo, hi) = x
         .iter()
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
@@ -606,9 +664,11 @@ pub fn identify(
             noise_mm,
         });
     }
-    let vmax = xd.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
-    let band = (3.0 * var_xd.sqrt()).max(1e-3 * vmax);
-    let sgn = xd
+    // Which samples move, and their friction sign, come from the motion velocity: its noise
+    // is independent of every regressor's, so the choice does not bias the fit.
+    let vmax = motion.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    let band = (3.0 * var_motion.sqrt()).max(1e-3 * vmax);
+    let sgn = motion
         .iter()
         .map(|&v| if v > 0.0 { 1.0 } else { -1.0 })
         .collect();
@@ -626,7 +686,7 @@ pub fn identify(
     };
 
     // Stage 1: k2 on quasi-static samples, model mu*exp(k2 x) + F0.
-    let qs: Vec<usize> = (0..n).filter(|&i| all.xd[i].abs() <= 0.1 * vmax).collect();
+    let qs: Vec<usize> = (0..n).filter(|&i| motion[i].abs() <= 0.1 * vmax).collect();
     let qs = if qs.len() >= 50 { qs } else { (0..n).collect() };
     let qs_rows = all.subset(&qs, false);
     let mut spring_only = [false, false, false, false, true, true, true];
@@ -657,7 +717,7 @@ pub fn identify(
     let (p1, _) = gauss_newton(best.1, &qs_rows, &mut spring_only, 100)?;
 
     // Stage 2: the paper's WLS with k2 fixed, on the samples whose friction sign is known.
-    let moving: Vec<usize> = (0..n).filter(|&i| all.xd[i].abs() > band).collect();
+    let moving: Vec<usize> = (0..n).filter(|&i| motion[i].abs() > band).collect();
     let needed = 20 * 7;
     if moving.len() < needed {
         return Err(IdentifyError::TooLittleMotion {

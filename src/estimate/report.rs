@@ -77,9 +77,9 @@ fn channel(
 pub fn noise_model(log: &CalibrationLog) -> NoiseModel {
     let dt = log.dt_s();
     let diff = Differentiator::for_rate(1.0 / dt);
-    let force_rate = diff.apply(&log.force_n, dt, 1);
+    let force_rate = diff.apply(&log.force_n, dt, super::sg::RATE);
     let force = channel("force", "N", "n", &log.force_n, dt);
-    let predicted = diff.noise_variance(1, force.fit.variance, dt);
+    let predicted = diff.noise_variance(super::sg::RATE, force.fit.variance, dt);
     NoiseModel {
         channels: [
             force,
@@ -292,7 +292,8 @@ pub fn format_identification(id: &Identification) -> String {
         let _ = writeln!(
             s,
             "warning: not identifiable (poor excitation): {}. Record a run that moves faster and \
-             reverses (for m, d0, d1, d2) or covers more of the stroke (for mu, F0, k2). The \
+             reverses (for m, d0, d1, d2) or covers more of the stroke (for mu, F0, k2); for m on a \
+             slow run, a longer filter (--window 0.8s) lowers the acceleration noise. The \
              parameters left in the model absorb the removed ones (F0 takes d0 when the motion \
              never reverses).",
             id.not_identifiable.join(", ")

@@ -6,12 +6,16 @@
 //! encoder (0.01 mm^2) into usable accelerations, and short enough to follow motions up to
 //! about 0.5 Hz with a bias of the second derivative below 1 %.
 //!
-//! The three outputs use kernels whose noise is mutually uncorrelated ([`Differentiator`]):
-//! velocity is the usual antisymmetric kernel (uncorrelated with any symmetric one), the
-//! position is fitted to the window's odd offsets only and the acceleration to its even
-//! offsets only. With one shared kernel set the smoothed position and acceleration would share
-//! noisy samples; through the spring's stiffness that correlation biases the identified
-//! inertia by many standard deviations.
+//! Identification uses four kernels whose noise is mutually independent ([`Differentiator`]):
+//! the position is fitted to the window's odd offsets and the acceleration to its even offsets
+//! (disjoint samples); the velocity regressor is the derivative fitted to the even offsets
+//! (antisymmetric, so uncorrelated with the symmetric acceleration kernel on the same samples);
+//! and the velocity that decides which samples move and their friction sign is the derivative
+//! fitted to the odd offsets. With one shared kernel set the smoothed position and
+//! acceleration would share noisy samples, which through the spring's stiffness biases the
+//! inertia by many standard deviations; and choosing samples by the same noisy velocity that
+//! enters the regression biases d0, d1 and d2. A fifth kernel, the derivative over the whole
+//! window, gives the force rate (lowest noise; it is not a regressor).
 
 use nalgebra::DMatrix;
 
@@ -51,13 +55,25 @@ fn kernel(half: usize, offsets: &[i64], order: usize, deriv: usize) -> Vec<f64> 
     w
 }
 
-/// Position, velocity and acceleration kernels with mutually uncorrelated noise.
+/// Kernel index: position (odd offsets).
+pub const POSITION: usize = 0;
+/// Kernel index: velocity regressor (even offsets).
+pub const VELOCITY: usize = 1;
+/// Kernel index: acceleration (even offsets).
+pub const ACCELERATION: usize = 2;
+/// Kernel index: velocity for motion detection and friction sign (odd offsets).
+pub const MOTION_VELOCITY: usize = 3;
+/// Kernel index: derivative over the whole window (force rate).
+pub const RATE: usize = 4;
+
+/// The five kernels; see the module documentation.
 #[derive(Debug, Clone)]
 pub struct Differentiator {
     /// Half width: the window is 2*half + 1 samples.
     pub half: usize,
-    /// Weights for the position, velocity and acceleration (unit sample spacing).
-    pub weights: [Vec<f64>; 3],
+    /// Weights of [`POSITION`], [`VELOCITY`], [`ACCELERATION`], [`MOTION_VELOCITY`] and
+    /// [`RATE`] (unit sample spacing).
+    pub weights: [Vec<f64>; 5],
 }
 
 impl Differentiator {
@@ -72,8 +88,10 @@ impl Differentiator {
             half,
             weights: [
                 kernel(half, &odd, ORDER, 0),
-                kernel(half, &all, ORDER_DERIVATIVES, 1),
+                kernel(half, &even, ORDER_DERIVATIVES, 1),
                 kernel(half, &even, ORDER_DERIVATIVES, 2),
+                kernel(half, &odd, ORDER_DERIVATIVES, 1),
+                kernel(half, &all, ORDER_DERIVATIVES, 1),
             ],
         }
     }
@@ -88,7 +106,7 @@ impl Differentiator {
         2 * self.half + 1
     }
 
-    /// Output `k` (0 position, 1 velocity, 2 acceleration) of `y` sampled every `dt`, for the
+    /// Output of kernel `k` (see the index constants) of `y` sampled every `dt`, for the
     /// samples whose whole window lies inside the data (indices half .. n - half).
     pub fn apply(&self, y: &[f64], dt: f64, k: usize) -> Vec<f64> {
         let n = y.len();
@@ -96,7 +114,7 @@ impl Differentiator {
         if n < 2 * h + 1 {
             return Vec::new();
         }
-        let scale = 1.0 / dt.powi(k as i32);
+        let scale = 1.0 / dt.powi(Self::order(k));
         let w = &self.weights[k];
         (h..n - h)
             .map(|c| {
@@ -111,7 +129,16 @@ impl Differentiator {
 
     /// Variance of output `k` for white input noise of variance `var` sampled every `dt`.
     pub fn noise_variance(&self, k: usize, var: f64, dt: f64) -> f64 {
-        var * self.weights[k].iter().map(|w| w * w).sum::<f64>() / dt.powi(2 * k as i32)
+        var * self.weights[k].iter().map(|w| w * w).sum::<f64>() / dt.powi(2 * Self::order(k))
+    }
+
+    /// Derivative order of kernel `k`.
+    fn order(k: usize) -> i32 {
+        match k {
+            POSITION => 0,
+            ACCELERATION => 2,
+            _ => 1,
+        }
     }
 }
 
@@ -126,15 +153,19 @@ mod tests {
         let f = |t: f64| 2.0 + 3.0 * t - 4.0 * t * t + 0.5 * t * t * t;
         let y: Vec<f64> = (0..200).map(|i| f(i as f64 * dt)).collect();
         let t = (50 + d.half) as f64 * dt;
-        assert!((d.apply(&y, dt, 0)[50] - f(t)).abs() < 1e-9);
-        assert!((d.apply(&y, dt, 1)[50] - (3.0 - 8.0 * t + 1.5 * t * t)).abs() < 1e-7);
-        assert!((d.apply(&y, dt, 2)[50] - (-8.0 + 3.0 * t)).abs() < 1e-5);
+        assert!((d.apply(&y, dt, POSITION)[50] - f(t)).abs() < 1e-9);
+        for k in [VELOCITY, MOTION_VELOCITY, RATE] {
+            assert!((d.apply(&y, dt, k)[50] - (3.0 - 8.0 * t + 1.5 * t * t)).abs() < 1e-7);
+        }
+        assert!((d.apply(&y, dt, ACCELERATION)[50] - (-8.0 + 3.0 * t)).abs() < 1e-5);
     }
 
     #[test]
     fn kernels_have_uncorrelated_noise() {
         let d = Differentiator::new(41);
-        for (a, b) in [(0, 1), (0, 2), (1, 2)] {
+        // Every pair used together in identification is uncorrelated (hence independent for
+        // Gaussian noise): position, velocity, acceleration and the motion velocity.
+        for (a, b) in [(0, 1), (0, 2), (1, 2), (0, 3), (1, 3), (2, 3)] {
             let dot: f64 = d.weights[a]
                 .iter()
                 .zip(&d.weights[b])
