@@ -44,6 +44,43 @@ fn benches(c: &mut Criterion) {
     group.bench_function("identify (1 h at 100 Hz, sines)", |b| {
         b.iter(|| identify(black_box(&log), &SensorNoise::default()).unwrap())
     });
+    // The EKF itself: predict + Joseph update + checks per sample, no CSV, no identification.
+    {
+        use camspring::estimate::ekf::{
+            default_settings, force_rate, initial_state, Discretization, Ekf, EkfInit, ForceRate,
+        };
+        let id = identify(&log, &SensorNoise::default()).unwrap();
+        let init = EkfInit::from_identification(&id);
+        let dt = log.dt_s();
+        let (rate, first) = force_rate(&log.force_n, dt, ForceRate::ZeroPhase);
+        let (z0, sigma_std) = initial_state(&init, log.position_mm[first], 20.0);
+        for (name, discretization) in [
+            ("ekf step, rk4 (1 h at 100 Hz)", Discretization::Rk4),
+            ("ekf step, euler (1 h at 100 Hz)", Discretization::Euler),
+        ] {
+            let mut settings = default_settings(
+                &init,
+                &SensorNoise::default(),
+                dt,
+                discretization,
+                ForceRate::ZeroPhase,
+            );
+            settings.p0_std[3] = sigma_std;
+            group.throughput(Throughput::Elements(rate.len() as u64 - 1));
+            group.bench_function(name, |b| {
+                b.iter(|| {
+                    let mut ekf = Ekf::new(z0, settings);
+                    for k in 1..rate.len() {
+                        let i = first + k;
+                        let _ = ekf
+                            .step(rate[k - 1], rate[k], dt, log.position_mm[i], i, log.t_s[i])
+                            .unwrap();
+                    }
+                    black_box(ekf.z)
+                })
+            });
+        }
+    }
     let rest = hour_log(Profile::Static);
     group.bench_function("noise model (1 h at 100 Hz, 3 channels)", |b| {
         b.iter(|| noise_model(black_box(&rest)))

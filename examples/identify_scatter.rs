@@ -3,7 +3,7 @@
 //! relative error of k2 and mu. A spread near 1 means the reported std matches the scatter.
 //!
 //! Run: `cargo run --release --example identify_scatter [seeds] [seconds] [m d1 d2]`
-//! (default 20, 300 and the simulator's default dynamics).
+//! (default 20, 300 and `Dynamics::light()`).
 
 use camspring::estimate::identify::{identify, SensorNoise, PARAMS};
 use camspring::estimate::sim::{simulate, Dynamics, Noise, Profile, SimSettings};
@@ -29,7 +29,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         (Profile::Steps, 0.0),
         (Profile::RampHold, 0.2),
     ] {
-        let base = Dynamics::default();
+        let base = Dynamics::light();
         let arg = |i: usize, d: f64| args.get(i).and_then(|s| s.parse().ok()).unwrap_or(d);
         let dynamics = Dynamics {
             m_n_s2_per_mm: arg(3, base.m_n_s2_per_mm),

@@ -45,6 +45,10 @@ pub enum Error {
     /// Produced by [`crate::run::run_identify`] when the log cannot identify the spring.
     #[error("identify: {0}")]
     Identify(#[from] crate::estimate::identify::IdentifyError),
+    /// Produced by [`crate::run::run_estimate`] and [`crate::run::run_validate`] when the
+    /// filter diverges or the log is too short for it.
+    #[error("estimate: {0}")]
+    Estimate(#[from] crate::estimate::ekf::EkfError),
     /// Produced by the commands for an unusable option value.
     #[error("{0}")]
     Argument(String),
@@ -89,6 +93,7 @@ impl Error {
                 | Error::Log { .. }
                 | Error::Simulate(_)
                 | Error::Identify(_)
+                | Error::Estimate(_)
                 | Error::Argument(_)
         )
     }

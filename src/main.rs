@@ -23,16 +23,20 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+use camspring::estimate::ekf::{Discretization, ForceRate};
 use camspring::estimate::identify::SensorNoise;
 use camspring::estimate::log::{parse_column, parse_time_column, ColumnMap};
+use camspring::estimate::report::{estimate_json, format_estimate};
 use camspring::estimate::report::{
     format_identification, format_noise, identification_json, noise_json,
 };
 use camspring::estimate::sim::{Dynamics, Noise, Profile, SimSettings};
+use camspring::estimate::validate::format_validation;
 use camspring::estimate::{parse_duration_s, parse_fraction, parse_rate_hz};
 use camspring::run::{
-    format_design, load_noise_json, run_design, run_identify, run_noise, run_simulate,
-    SimulateOptions, EXIT_BAD_INPUT, EXIT_IO,
+    format_design, load_noise_json, run_design, run_estimate, run_identify, run_noise,
+    run_simulate, run_validate, EstimateInit, EstimateOptions, SimulateOptions, EXIT_BAD_INPUT,
+    EXIT_IO,
 };
 
 #[derive(Parser, Debug)]
@@ -93,16 +97,16 @@ enum Command {
         #[arg(long, default_value_t = 0)]
         seed: u64,
         /// Inertia m in N s^2/mm.
-        #[arg(long, default_value_t = 2e-3)]
+        #[arg(long, default_value_t = 0.05)]
         m: f64,
         /// Coulomb friction d0 in N.
         #[arg(long, default_value_t = 0.0)]
         d0: f64,
         /// Linear damping d1 in N s/mm.
-        #[arg(long, default_value_t = 0.02)]
+        #[arg(long, default_value_t = 0.2)]
         d1: f64,
         /// Cubic damping d2 in N s^3/mm^3.
-        #[arg(long, default_value_t = -2e-5, allow_hyphen_values = true)]
+        #[arg(long, default_value_t = -1e-4, allow_hyphen_values = true)]
         d2: f64,
         /// Force noise variance in N^2 (the paper's 0.017).
         #[arg(long, default_value_t = 0.017)]
@@ -140,24 +144,182 @@ enum Command {
     Identify {
         /// Calibration log (CSV with a header).
         log: PathBuf,
-        /// Sensor noise from `camspring noise --json` (default: the paper's sensors).
-        #[arg(long)]
-        noise: Option<PathBuf>,
-        /// Force noise variance in N^2 (overrides --noise).
-        #[arg(long)]
-        force_variance: Option<f64>,
-        /// Position noise variance in mm^2 (overrides --noise).
-        #[arg(long)]
-        position_variance: Option<f64>,
-        /// Savitzky-Golay window, e.g. 0.8s (default about 0.4 s); longer for slow runs.
-        #[arg(long)]
-        window: Option<String>,
         /// Print the result as JSON on stdout.
         #[arg(long)]
         json: bool,
         #[command(flatten)]
+        sensors: Sensors,
+        #[command(flatten)]
         columns: Columns,
     },
+    /// Run the paper's EKF over a log: stiffness, damping and inertia on-line.
+    ///
+    /// Writes the time series (t_s, each state and its 1-sigma bound, F0 and d0) as CSV and
+    /// prints the final estimates (the paper's Table II).
+    ///
+    /// Examples:
+    ///   camspring estimate out/paper/calib.csv -o out/paper/est.csv
+    ///   camspring estimate calib.csv --init specs/paper.toml --json
+    ///   camspring estimate calib.csv --discretization euler     # the paper's, for comparison
+    #[command(verbatim_doc_comment)]
+    Estimate {
+        /// Calibration log (CSV with a header).
+        log: PathBuf,
+        /// Time series CSV to write (default: the log's name with .est.csv).
+        #[arg(short, long)]
+        out: Option<PathBuf>,
+        /// Print the final estimates as JSON on stdout.
+        #[arg(long)]
+        json: bool,
+        #[command(flatten)]
+        filter: FilterArgs,
+        #[command(flatten)]
+        sensors: Sensors,
+        #[command(flatten)]
+        columns: Columns,
+    },
+    /// Check a built spring's calibration log against its design: one verdict.
+    ///
+    /// Exit code 0 pass, 1 fail, 2 bad input. Writes validation.svg next to the log.
+    ///
+    /// Examples:
+    ///   camspring validate specs/paper.toml out/paper/calib.csv
+    ///   camspring validate specs/paper.toml calib.csv --tolerance 3% --json
+    #[command(verbatim_doc_comment)]
+    Validate {
+        /// Spec file (TOML) of the design.
+        spec: PathBuf,
+        /// Calibration log (CSV with a header).
+        log: PathBuf,
+        /// Allowed relative deviation of each criterion, e.g. 3%.
+        #[arg(long, default_value = "3%")]
+        tolerance: String,
+        /// Plot to write (default validation.svg next to the log).
+        #[arg(long)]
+        svg: Option<PathBuf>,
+        /// Print the verdict as JSON on stdout.
+        #[arg(long)]
+        json: bool,
+        #[command(flatten)]
+        filter: FilterArgs,
+        #[command(flatten)]
+        sensors: Sensors,
+        #[command(flatten)]
+        columns: Columns,
+    },
+}
+
+/// Sensor noise and filter window for identification and estimation.
+#[derive(clap::Args, Debug)]
+struct Sensors {
+    /// Sensor noise from `camspring noise --json` (default: the paper's sensors).
+    #[arg(long)]
+    noise: Option<PathBuf>,
+    /// Force noise variance in N^2 (overrides --noise).
+    #[arg(long)]
+    force_variance: Option<f64>,
+    /// Position noise variance in mm^2 (overrides --noise).
+    #[arg(long)]
+    position_variance: Option<f64>,
+    /// Savitzky-Golay window, e.g. 0.8s (default about 0.4 s); longer for slow runs.
+    #[arg(long)]
+    window: Option<String>,
+}
+
+impl Sensors {
+    fn parse(&self) -> Result<(SensorNoise, Option<f64>), camspring::Error> {
+        let window_s = self
+            .window
+            .as_deref()
+            .map(parse_duration_s)
+            .transpose()
+            .map_err(|e| camspring::Error::Argument(format!("--window {e}")))?;
+        let mut sensor = match &self.noise {
+            Some(p) => load_noise_json(p)?,
+            None => SensorNoise::default(),
+        };
+        for (v, name) in [
+            (self.force_variance, "--force-variance"),
+            (self.position_variance, "--position-variance"),
+        ] {
+            if let Some(v) = v {
+                if !(v.is_finite() && v >= 0.0) {
+                    return Err(camspring::Error::Argument(format!(
+                        "{name} {v}: expected a variance >= 0"
+                    )));
+                }
+            }
+        }
+        if let Some(v) = self.force_variance {
+            sensor.force_variance_n2 = v;
+        }
+        if let Some(v) = self.position_variance {
+            sensor.position_variance_mm2 = v;
+        }
+        Ok((sensor, window_s))
+    }
+}
+
+/// EKF options.
+#[derive(clap::Args, Debug)]
+struct FilterArgs {
+    /// Initial state: `identify` (offline identification of the same log) or a spec file.
+    #[arg(long, default_value = "identify")]
+    init: String,
+    /// Prediction: rk4 (accurate) or euler (the paper's, biased).
+    #[arg(long, default_value = "rk4")]
+    discretization: String,
+    /// Force-rate input: zero-phase (offline) or first-order[:TIME] (the paper's filter; TIME defaults to 0.02s).
+    #[arg(long, default_value = "zero-phase")]
+    force_rate: String,
+}
+
+impl FilterArgs {
+    fn parse(
+        &self,
+        noise: SensorNoise,
+        window_s: Option<f64>,
+    ) -> Result<EstimateOptions, camspring::Error> {
+        let arg = camspring::Error::Argument;
+        let discretization = match self.discretization.as_str() {
+            "rk4" => Discretization::Rk4,
+            "euler" => Discretization::Euler,
+            other => {
+                return Err(arg(format!(
+                    "--discretization \"{other}\": expected rk4 or euler"
+                )))
+            }
+        };
+        let force_rate = match self.force_rate.split_once(':') {
+            None if self.force_rate == "zero-phase" => ForceRate::ZeroPhase,
+            None if self.force_rate == "first-order" => ForceRate::FirstOrder {
+                time_constant_s: 0.02,
+            },
+            Some(("first-order", t)) => ForceRate::FirstOrder {
+                time_constant_s: parse_duration_s(t)
+                    .map_err(|e| arg(format!("--force-rate {e}")))?,
+            },
+            _ => {
+                return Err(arg(format!(
+                    "--force-rate \"{}\": expected zero-phase or first-order[:TIME]",
+                    self.force_rate
+                )))
+            }
+        };
+        let init = if self.init == "identify" {
+            EstimateInit::Identify
+        } else {
+            EstimateInit::Spec(PathBuf::from(&self.init))
+        };
+        Ok(EstimateOptions {
+            init,
+            discretization,
+            force_rate,
+            noise,
+            window_s,
+            outlier_sigmas: None,
+        })
+    }
 }
 
 /// Column mapping of a calibration log.
@@ -341,42 +503,13 @@ fn main() -> ExitCode {
         }
         Command::Identify {
             log,
-            noise,
-            force_variance,
-            position_variance,
-            window,
             json,
+            sensors,
             columns,
         } => {
             let run = (|| {
                 let (map, tol) = columns.parse()?;
-                let window_s = window
-                    .as_deref()
-                    .map(parse_duration_s)
-                    .transpose()
-                    .map_err(|e| camspring::Error::Argument(format!("--window {e}")))?;
-                let mut sensor = match &noise {
-                    Some(p) => load_noise_json(p)?,
-                    None => SensorNoise::default(),
-                };
-                for (v, name) in [
-                    (force_variance, "--force-variance"),
-                    (position_variance, "--position-variance"),
-                ] {
-                    if let Some(v) = v {
-                        if !(v.is_finite() && v >= 0.0) {
-                            return Err(camspring::Error::Argument(format!(
-                                "{name} {v}: expected a variance >= 0"
-                            )));
-                        }
-                    }
-                }
-                if let Some(v) = force_variance {
-                    sensor.force_variance_n2 = v;
-                }
-                if let Some(v) = position_variance {
-                    sensor.position_variance_mm2 = v;
-                }
+                let (sensor, window_s) = sensors.parse()?;
                 let (id, log) = run_identify(&log, &map, tol, &sensor, window_s)?;
                 Ok((id, log, sensor))
             })();
@@ -387,6 +520,79 @@ fn main() -> ExitCode {
                 Ok((id, _, _)) => {
                     out!("{}", format_identification(&id));
                     ExitCode::SUCCESS
+                }
+                Err(e) => fail(&e),
+            }
+        }
+        Command::Estimate {
+            log,
+            out,
+            json,
+            filter,
+            sensors,
+            columns,
+        } => {
+            let run = (|| {
+                let (map, tol) = columns.parse()?;
+                let (sensor, window_s) = sensors.parse()?;
+                let opts = filter.parse(sensor, window_s)?;
+                run_estimate(&log, &map, tol, &opts, out.as_deref())
+            })();
+            match run {
+                Ok((est, _)) if json => print_json(&estimate_json(&est.run, &est.settings)),
+                Ok((est, path)) => {
+                    out!("{}", format_estimate(&est.run));
+                    outln!("  time series: {}", path.display());
+                    ExitCode::SUCCESS
+                }
+                Err(e) => fail(&e),
+            }
+        }
+        Command::Validate {
+            spec,
+            log,
+            tolerance,
+            svg,
+            json,
+            filter,
+            sensors,
+            columns,
+        } => {
+            let run = (|| {
+                let (map, tol) = columns.parse()?;
+                let (sensor, window_s) = sensors.parse()?;
+                let opts = filter.parse(sensor, window_s)?;
+                if !matches!(opts.init, EstimateInit::Identify) {
+                    return Err(camspring::Error::Argument(
+                        "validate: --init must be identify (the design is what is checked)".into(),
+                    ));
+                }
+                let tolerance = parse_fraction(&tolerance)
+                    .map_err(|e| camspring::Error::Argument(format!("--tolerance {e}")))?;
+                run_validate(
+                    Some(&spec),
+                    &log,
+                    &map,
+                    tol,
+                    &opts,
+                    tolerance,
+                    svg.as_deref(),
+                )
+            })();
+            match run {
+                Ok((v, path)) => {
+                    let code = if v.pass {
+                        ExitCode::SUCCESS
+                    } else {
+                        ExitCode::from(1)
+                    };
+                    if json {
+                        let _ = print_json(&v);
+                    } else {
+                        out!("{}", format_validation(&v));
+                        outln!("  plot: {}", path.display());
+                    }
+                    code
                 }
                 Err(e) => fail(&e),
             }

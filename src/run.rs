@@ -358,3 +358,192 @@ pub fn run_identify(
     let id = crate::estimate::identify::identify_with_window(&log, noise, window_s)?;
     Ok((id, log))
 }
+
+/// Where `camspring estimate` takes the filter's initial state from.
+#[derive(Debug, Clone)]
+pub enum EstimateInit {
+    /// Offline identification of the same log (the paper's procedure; default).
+    Identify,
+    /// A spec's designed law (k2, mu, F0); the dynamics start wide.
+    Spec(PathBuf),
+}
+
+/// Options of `camspring estimate`.
+#[derive(Debug, Clone)]
+pub struct EstimateOptions {
+    /// Initial state.
+    pub init: EstimateInit,
+    /// Prediction method.
+    pub discretization: crate::estimate::ekf::Discretization,
+    /// Force-rate input.
+    pub force_rate: crate::estimate::ekf::ForceRate,
+    /// Sensor noise (R and the force-rate noise).
+    pub noise: crate::estimate::identify::SensorNoise,
+    /// Identification window (s), when identifying.
+    pub window_s: Option<f64>,
+    /// Innovations beyond this many standard deviations count as outliers; 50 in a row stop
+    /// the filter (None: 8).
+    pub outlier_sigmas: Option<f64>,
+}
+
+/// What `camspring estimate` computed.
+#[derive(Debug, Clone)]
+pub struct EstimateRun {
+    /// The filter run.
+    pub run: crate::estimate::ekf::EkfRun,
+    /// The settings used.
+    pub settings: crate::estimate::ekf::EkfSettings,
+    /// The identification, when the init came from it.
+    pub identification: Option<crate::estimate::identify::Identification>,
+}
+
+/// Runs the EKF over a log already read.
+pub fn estimate_log(
+    log: &crate::estimate::log::CalibrationLog,
+    opts: &EstimateOptions,
+    progress: bool,
+) -> Result<EstimateRun> {
+    use crate::estimate::ekf::{self, EkfInit};
+    use crate::estimate::identify::identify_with_window;
+    use crate::estimate::sg;
+    let (init, identification, stroke) = match &opts.init {
+        EstimateInit::Identify => {
+            let id = identify_with_window(log, &opts.noise, opts.window_s)?;
+            let stroke = log.position_mm.iter().fold(0.0_f64, |m, &x| m.max(x.abs()));
+            (EkfInit::from_identification(&id), Some(id), stroke)
+        }
+        EstimateInit::Spec(path) => {
+            let spec = load_spec(Some(path))?;
+            let law = crate::design::law_of(&spec)
+                .map_err(|e| Error::Design(e.into()))?
+                .law;
+            (EkfInit::from_law(&law), None, spec.law.xmax_mm())
+        }
+    };
+    let dt = log.dt_s();
+    let mut settings =
+        ekf::default_settings(&init, &opts.noise, dt, opts.discretization, opts.force_rate);
+    // Coulomb friction steps the force at every reversal; its derivative is not in the
+    // filter's model. Take the initial d0 out of the force first (sign of the motion velocity).
+    let mut force = log.force_n.clone();
+    if init.d0_n != 0.0 {
+        let diff = sg::Differentiator::for_rate(1.0 / dt);
+        let v = diff.apply(&log.position_mm, dt, sg::MOTION_VELOCITY);
+        let band = 3.0
+            * diff
+                .noise_variance(sg::MOTION_VELOCITY, opts.noise.position_variance_mm2, dt)
+                .sqrt();
+        let mut sign = 0.0;
+        for (i, f) in force.iter_mut().enumerate() {
+            let vi = v.get(i.saturating_sub(diff.half).min(v.len().saturating_sub(1)));
+            if let Some(&vi) = vi {
+                if vi > band {
+                    sign = 1.0;
+                } else if vi < -band {
+                    sign = -1.0;
+                }
+            }
+            *f -= init.d0_n * sign;
+        }
+    }
+    let (_, first) = ekf::force_rate(&force, dt, opts.force_rate);
+    let x0 = log.position_mm.get(first).copied().unwrap_or(0.0);
+    let (z0, sigma_std) = ekf::initial_state(&init, x0, stroke);
+    settings.p0_std[ekf::idx::SIGMA] = sigma_std;
+    if let Some(k) = opts.outlier_sigmas {
+        settings.outlier_sigmas = k;
+    }
+    use std::io::IsTerminal;
+    let show = progress
+        && std::io::stderr().is_terminal()
+        && std::env::var_os("CI").is_none()
+        && log.len() > 200_000;
+    let bar = show.then(|| {
+        let bar = indicatif::ProgressBar::new(log.len() as u64);
+        bar.set_style(
+            indicatif::ProgressStyle::with_template("EKF {bar:40} {pos}/{len} samples ({per_sec})")
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        bar
+    });
+    let run = ekf::run(
+        &log.t_s,
+        &force,
+        &log.position_mm,
+        opts.force_rate,
+        z0,
+        settings,
+        [init.f0_n, init.d0_n],
+        30.0,
+        |k, _| {
+            if let Some(b) = &bar {
+                b.set_position(k as u64);
+            }
+        },
+    );
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    let mut run = run.map_err(Error::Estimate)?;
+    // The parallel filter saw the force with the initial d0 taken out: add it back.
+    for o in run.offsets.iter_mut() {
+        o[1] += init.d0_n;
+    }
+    run.offset_filter.theta[1] += init.d0_n;
+    Ok(EstimateRun {
+        run,
+        settings,
+        identification,
+    })
+}
+
+/// Runs `camspring estimate`: reads the log, runs the EKF and writes the time series CSV
+/// (default `<log>.est.csv`). Returns the run and the path written.
+pub fn run_estimate(
+    log_path: &Path,
+    map: &crate::estimate::log::ColumnMap,
+    sampling_tolerance: f64,
+    opts: &EstimateOptions,
+    out: Option<&Path>,
+) -> Result<(EstimateRun, PathBuf)> {
+    let log = read_log_file(log_path, map, sampling_tolerance, true)?;
+    let est = estimate_log(&log, opts, true)?;
+    let out = out
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| log_path.with_extension("est.csv"));
+    crate::export::write_atomic(&out, &crate::estimate::report::estimate_csv(&est.run))?;
+    Ok((est, out))
+}
+
+/// Runs `camspring validate`: the log against the spec's designed law; writes
+/// `validation.svg` (default next to the log).
+pub fn run_validate(
+    spec_path: Option<&Path>,
+    log_path: &Path,
+    map: &crate::estimate::log::ColumnMap,
+    sampling_tolerance: f64,
+    opts: &EstimateOptions,
+    tolerance: f64,
+    svg: Option<&Path>,
+) -> Result<(crate::estimate::validate::Validation, PathBuf)> {
+    use crate::estimate::validate::{validate, validation_svg};
+    let spec = load_spec(spec_path)?;
+    let designed = crate::design::law_of(&spec)
+        .map_err(|e| Error::Design(e.into()))?
+        .law;
+    let log = read_log_file(log_path, map, sampling_tolerance, true)?;
+    let est = estimate_log(&log, opts, true)?;
+    let id = est
+        .identification
+        .as_ref()
+        .ok_or_else(|| Error::Argument("validate needs the identification init".into()))?;
+    let v = validate(&designed, id, &est.run, &log.position_mm, tolerance);
+    let svg_path = svg.map(Path::to_path_buf).unwrap_or_else(|| {
+        log_path
+            .parent()
+            .unwrap_or(Path::new("."))
+            .join("validation.svg")
+    });
+    crate::export::write_atomic(&svg_path, validation_svg(&v, &est.run).as_bytes())?;
+    Ok((v, svg_path))
+}

@@ -25,7 +25,7 @@ fn run(profile: Profile, seconds: f64, seed: u64, d0: f64) -> (CalibrationLog, T
         seed,
         dynamics: Dynamics {
             d0_n: d0,
-            ..Dynamics::default()
+            ..Dynamics::light()
         },
         noise: Noise::default(),
     };
@@ -135,7 +135,7 @@ fn noise_free_logs_give_the_parameters_without_filter_bias() {
         seed: 3,
         dynamics: Dynamics {
             d0_n: 0.2,
-            ..Dynamics::default()
+            ..Dynamics::light()
         },
         noise: Noise {
             force_variance_n2: 1e-14,

@@ -455,3 +455,95 @@ fn a_closed_pipe_is_not_a_crash() {
     );
     assert!(!String::from_utf8_lossy(&out.stderr).contains("panicked"));
 }
+
+#[test]
+fn estimate_and_validate_from_the_command_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let spec = spec_path("paper.toml");
+    let sim = |out: &str, extra: &[&str]| {
+        let mut args = vec![
+            "simulate",
+            spec.as_str(),
+            "-o",
+            out,
+            "--duration",
+            "300s",
+            "--m",
+            "0.05",
+            "--d1",
+            "0.2",
+            "--d2",
+            "-1e-4",
+        ];
+        args.extend_from_slice(extra);
+        assert_eq!(camspring(d, &args).status.code(), Some(0));
+    };
+    sim("calib.csv", &[]);
+    let out = camspring(d, &["estimate", "calib.csv", "-o", "est.csv", "--json"]);
+    assert_eq!(out.status.code(), Some(0));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    for key in [
+        "k2_per_mm",
+        "m_n_s2_per_mm",
+        "d2_n_s3_per_mm3",
+        "sigma_n_per_mm",
+        "d_n_s_per_mm",
+        "f0_n",
+        "d0_n",
+    ] {
+        assert!(v["final"][key].is_f64(), "{key}");
+        assert!(
+            v["final"][format!("{key}_std")].as_f64().unwrap() > 0.0,
+            "{key}_std"
+        );
+    }
+    let k2 = v["final"]["k2_per_mm"].as_f64().unwrap();
+    assert!((k2 / 0.2640383 - 1.0).abs() < 0.005, "{k2}");
+    let csv = std::fs::read_to_string(d.join("est.csv")).unwrap();
+    let header = csv.lines().next().unwrap();
+    assert!(
+        header.starts_with("t_s,x_mm,x_mm_std,xd_mm_per_s,"),
+        "{header}"
+    );
+    assert!(header.ends_with("f0_n,f0_n_std,d0_n,d0_n_std"), "{header}");
+    assert!(csv.lines().count() > 29_000);
+
+    // The designed spring passes (exit 0) and writes validation.svg.
+    let out = camspring(d, &["validate", &spec, "calib.csv", "--tolerance", "3%"]);
+    assert_eq!(out.status.code(), Some(0));
+    assert!(String::from_utf8_lossy(&out.stdout).starts_with("PASS"));
+    let svg = std::fs::read_to_string(d.join("validation.svg")).unwrap();
+    assert!(svg.contains("Stiffness against force") && svg.contains("<circle"));
+
+    // The ankle spec's design is a different spring: the same log fails (exit 1), by name.
+    let out = camspring(
+        d,
+        &["validate", &spec_path("ankle.toml"), "calib.csv", "--json"],
+    );
+    assert_eq!(out.status.code(), Some(1));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["pass"], false);
+    let k2 = v["criteria"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c["name"] == "k2")
+        .unwrap();
+    assert_eq!(k2["pass"], false);
+
+    // Bad options are bad input.
+    for args in [
+        vec!["estimate", "calib.csv", "--discretization", "midpoint"],
+        vec!["estimate", "calib.csv", "--force-rate", "psychic"],
+        vec![
+            "validate",
+            spec.as_str(),
+            "calib.csv",
+            "--tolerance",
+            "lots",
+        ],
+    ] {
+        assert_eq!(camspring(d, &args).status.code(), Some(2), "{args:?}");
+    }
+}

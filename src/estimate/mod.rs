@@ -1,14 +1,18 @@
 //! Calibration logs of a built spring: reading ([`log`]), simulating with known truth
 //! ([`sim`]), sensor noise by Allan variance ([`allan`]), smoothing differentiators ([`sg`]) and
 //! offline identification of the transmission parameters ([`identify`], paper sections IV-V).
-//! [`report`] turns the results into the JSON, text and SVG the commands write.
+//! The paper's EKF ([`ekf`]) estimates stiffness, damping and inertia on-line, and
+//! [`validate`] compares a log with the design. [`report`] turns the results into the JSON,
+//! text, CSV and SVG the commands write.
 
 pub mod allan;
+pub mod ekf;
 pub mod identify;
 pub mod log;
 pub mod report;
 pub mod sg;
 pub mod sim;
+pub mod validate;
 
 /// Parses a duration such as "300s", "300 s", "5min", "1h", "250ms" or a plain number of seconds.
 pub fn parse_duration_s(text: &str) -> Result<f64, String> {

@@ -206,6 +206,7 @@ pub fn allan_svg(model: &NoiseModel) -> String {
                 .collect(),
             color,
             dashed: false,
+            dots: false,
         })
         .collect();
     let panel = Panel {
@@ -305,5 +306,99 @@ pub fn format_identification(id: &Identification) -> String {
          quasi-static samples alone {:.5} 1/mm",
         id.residual_rms_n, id.reduced_chi2, id.condition_number, id.k2_quasi_static_per_mm
     );
+    s
+}
+
+/// The EKF time series as CSV: `t_s`, each state and its 1-sigma bound, then F0 and d0 from
+/// the parallel filter.
+pub fn estimate_csv(run: &super::ekf::EkfRun) -> Vec<u8> {
+    use super::ekf::STATE_NAMES;
+    let mut out = String::with_capacity(run.states.len() * 260 + 512);
+    out.push_str("t_s");
+    for name in STATE_NAMES {
+        let _ = write!(out, ",{name},{name}_std");
+    }
+    out.push_str(",f0_n,f0_n_std,d0_n,d0_n_std\n");
+    for i in 0..run.states.len() {
+        let _ = write!(out, "{:.6}", run.t_s[i]);
+        for k in 0..8 {
+            let _ = write!(out, ",{:.9e},{:.3e}", run.states[i][k], run.stds[i][k]);
+        }
+        let _ = writeln!(
+            out,
+            ",{:.6},{:.3e},{:.6},{:.3e}",
+            run.offsets[i][0], run.offset_stds[i][0], run.offsets[i][1], run.offset_stds[i][1]
+        );
+    }
+    out.into_bytes()
+}
+
+/// The final estimates (the paper's Table II) under the unit-bearing keys of `identify`,
+/// each with `_std`: k2_per_mm, m_n_s2_per_mm, d2_n_s3_per_mm3, sigma_n_per_mm (at the last
+/// sample), d_n_s_per_mm (at the last sample), f0_n and d0_n (parallel filter).
+pub fn estimate_json(run: &super::ekf::EkfRun, settings: &super::ekf::EkfSettings) -> Value {
+    use super::ekf::idx;
+    let z = run.last.z;
+    let sd = run.last.std();
+    let f = run.offset_filter.theta;
+    let fs = run.offset_filter.std();
+    json!({
+        "final": {
+            "k2_per_mm": z[idx::K2], "k2_per_mm_std": sd[idx::K2],
+            "m_n_s2_per_mm": z[idx::M], "m_n_s2_per_mm_std": sd[idx::M],
+            "d2_n_s3_per_mm3": z[idx::D2], "d2_n_s3_per_mm3_std": sd[idx::D2],
+            "sigma_n_per_mm": z[idx::SIGMA], "sigma_n_per_mm_std": sd[idx::SIGMA],
+            "d_n_s_per_mm": z[idx::D], "d_n_s_per_mm_std": sd[idx::D],
+            "f0_n": f[0], "f0_n_std": fs[0],
+            "d0_n": f[1], "d0_n_std": fs[1],
+        },
+        "t_end_s": run.t_s.last(),
+        "samples": run.states.len(),
+        "first_sample": run.first_sample,
+        "outliers": run.outliers,
+        "settings": settings,
+    })
+}
+
+/// The text summary of `camspring estimate`.
+pub fn format_estimate(run: &super::ekf::EkfRun) -> String {
+    use super::ekf::idx;
+    let z = run.last.z;
+    let sd = run.last.std();
+    let f = run.offset_filter.theta;
+    let fs = run.offset_filter.std();
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "EKF over {} samples (to t = {:.3} s); final estimates (1-sigma):",
+        run.states.len(),
+        run.t_s.last().copied().unwrap_or(0.0)
+    );
+    for (name, k, unit) in [
+        ("k2", idx::K2, "1/mm"),
+        ("M", idx::M, "N s^2/mm"),
+        ("d2", idx::D2, "N s^3/mm^3"),
+        ("sigma", idx::SIGMA, "N/mm (last sample)"),
+        ("D", idx::D, "N s/mm (last sample)"),
+    ] {
+        let _ = writeln!(s, "  {name:<5} = {:>12.5e} +- {:.2e} {unit}", z[k], sd[k]);
+    }
+    let _ = writeln!(
+        s,
+        "  F0    = {:>12.5e} +- {:.2e} N (parallel filter)",
+        f[0], fs[0]
+    );
+    let _ = writeln!(
+        s,
+        "  d0    = {:>12.5e} +- {:.2e} N (parallel filter)",
+        f[1], fs[1]
+    );
+    if run.outliers > 0 {
+        let _ = writeln!(
+            s,
+            "  note: {} innovations beyond the outlier threshold",
+            run.outliers
+        );
+    }
     s
 }

@@ -42,12 +42,28 @@ pub struct Dynamics {
 }
 
 impl Default for Dynamics {
+    /// A transmission of the order of the paper's Table II (m = 0.055, d2 = -0.11): m = 0.05
+    /// N s^2/mm, d1 = 0.2 N s/mm, d2 = -1e-4 N s^3/mm^3 (the damper force keeps growing with
+    /// speed up to 25.8 mm/s), no Coulomb friction.
     fn default() -> Self {
+        Dynamics {
+            m_n_s2_per_mm: 0.05,
+            d0_n: 0.0,
+            d1_n_s_per_mm: 0.2,
+            d2_n_s3_per_mm3: -1e-4,
+        }
+    }
+}
+
+impl Dynamics {
+    /// A light transmission (m = 2e-3, d1 = 0.02, d2 = -1e-5): its inertia and damping forces
+    /// are below the paper's force noise, which tests identification at the edge.
+    pub fn light() -> Self {
         Dynamics {
             m_n_s2_per_mm: 2e-3,
             d0_n: 0.0,
             d1_n_s_per_mm: 0.02,
-            d2_n_s3_per_mm3: -2e-5,
+            d2_n_s3_per_mm3: -1e-5,
         }
     }
 }
@@ -229,6 +245,16 @@ pub fn simulate(
             Profile::Steps => moves(&step_levels, STEP_RAMP_S, 1.5, t),
             Profile::Static => (0.5 * xmax_mm, 0.0, 0.0),
         };
+        if d.d2_n_s3_per_mm3 < 0.0 && 3.0 * d.d2_n_s3_per_mm3.abs() * xd * xd > d.d1_n_s_per_mm {
+            return Err(SimError::Settings(format!(
+                "at t = {t:.3} s the {:?} profile moves at {:.2} mm/s, where the damper force \
+                 d1 xd + d2 xd^3 would fall with speed (above sqrt(d1 / (3 |d2|)) = {:.2} mm/s); \
+                 use a smaller |d2| or a larger d1",
+                s.profile,
+                xd.abs(),
+                (d.d1_n_s_per_mm / (3.0 * d.d2_n_s3_per_mm3.abs())).sqrt()
+            )));
+        }
         let sgn = if xd > 0.0 {
             1.0
         } else if xd < 0.0 {

@@ -356,18 +356,21 @@ pub fn force_svg(design: &Design) -> String {
                 points: pts(&|f| Some((f.x_mm, f.design_n))),
                 color: "#000",
                 dashed: false,
+                dots: false,
             },
             Series {
                 label: "predicted loading".into(),
                 points: pts(&|f| f.loading_n.map(|l| (f.x_mm, l))),
                 color: "#c62828",
                 dashed: true,
+                dots: false,
             },
             Series {
                 label: "predicted unloading".into(),
                 points: pts(&|f| Some((f.x_mm, f.unloading_n))),
                 color: "#1565c0",
                 dashed: true,
+                dots: false,
             },
         ],
         ..Panel::default()
@@ -396,12 +399,14 @@ pub fn force_svg(design: &Design) -> String {
                 points: pts(&|f| Some((f.design_n, f.stiffness_n_per_mm))),
                 color: "#000",
                 dashed: false,
+                dots: false,
             },
             Series {
                 label: "predicted loading".into(),
                 points: loading_stiffness,
                 color: "#c62828",
                 dashed: true,
+                dots: false,
             },
         ],
         ..Panel::default()
@@ -433,6 +438,7 @@ pub fn profile_svg(design: &Design) -> String {
                 points: samples.iter().map(|s| (s.x_mm, s.y_mm)).collect(),
                 color: "#1565c0",
                 dashed: true,
+                dots: false,
             },
             Series {
                 label: "cam surface".into(),
@@ -444,6 +450,7 @@ pub fn profile_svg(design: &Design) -> String {
                     .collect(),
                 color: "#000",
                 dashed: false,
+                dots: false,
             },
         ],
         circles,
@@ -494,6 +501,7 @@ pub fn toolpath_svg(design: &Design, part: &Part, passes: &[toolpath::Pass]) -> 
         points: outline,
         color: "#000",
         dashed: false,
+        dots: false,
     }];
     let deepest_rough = passes
         .iter()
@@ -533,6 +541,7 @@ pub fn toolpath_svg(design: &Design, part: &Part, passes: &[toolpath::Pass]) -> 
             points: pts,
             color,
             dashed: false,
+            dots: false,
         });
     }
     series.push(Series {
@@ -540,6 +549,7 @@ pub fn toolpath_svg(design: &Design, part: &Part, passes: &[toolpath::Pass]) -> 
         points: rapids,
         color: "#999",
         dashed: true,
+        dots: false,
     });
     let panel = Panel {
         title: format!(

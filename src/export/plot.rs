@@ -15,6 +15,8 @@ pub struct Series {
     pub color: &'static str,
     /// Dashed stroke.
     pub dashed: bool,
+    /// Draw the points as dots (a scatter) instead of a line.
+    pub dots: bool,
 }
 
 /// One plot panel.
@@ -222,6 +224,21 @@ pub fn render_panel(panel: &Panel, x0: f64, y0: f64, w: f64, h: f64) -> Group {
         );
     }
     for (i, s) in panel.series.iter().enumerate() {
+        if s.dots {
+            for &(x, y) in s
+                .points
+                .iter()
+                .filter(|p| p.0.is_finite() && p.1.is_finite())
+            {
+                g = g.add(
+                    Circle::new()
+                        .set("cx", format!("{:.2}", px(x)))
+                        .set("cy", format!("{:.2}", py(y)))
+                        .set("r", 1.6)
+                        .set("fill", s.color),
+                );
+            }
+        }
         let pts: Vec<String> = s
             .points
             .iter()
@@ -236,7 +253,12 @@ pub fn render_panel(panel: &Panel, x0: f64, y0: f64, w: f64, h: f64) -> Group {
         if s.dashed {
             line = line.set("stroke-dasharray", "6,4");
         }
-        g = g.add(line);
+        if !s.dots {
+            g = g.add(line);
+        }
+        if s.label.is_empty() {
+            continue;
+        }
         let ly = y0 + top + 14.0 + 16.0 * i as f64;
         let mut key = Line::new()
             .set("x1", x0 + left + 10.0)

@@ -1,0 +1,660 @@
+//! On-line impedance estimation: the paper's Extended Kalman Filter (section VI), built from
+//! the derivation in physics.md section 3 rather than the printed discrete equations.
+//!
+//! State Z = [x, xd, xdd, sigma, D, M, k2, d2] (mm, mm/s, mm/s^2, N/mm, N s/mm, N s^2/mm, 1/mm,
+//! N s^3/mm^3). Input: the force rate u = Fdot (N/s). Measurement: the encoder position x.
+//!
+//! ```text
+//! x' = xd;  xd' = xdd;  xdd' = (u - sigma*xd - D*xdd)/M
+//! sigma' = k2*sigma*xd;  D' = 6*d2*xd*xdd;  M' = k2' = d2' = 0
+//! ```
+//!
+//! Prediction integrates this with one classic RK4 step per sample (the input interpolated
+//! linearly between samples), or with the paper's forward Euler for comparison. Forward Euler
+//! lags half a sample and biases D and M (physics.md). The covariance goes through the
+//! transition matrix Phi = I + A T + (A T)^2 / 2 of the analytic Jacobian A; process noise is
+//! Q T (the product exploits that only five rows of A are non-zero). The update is the Joseph form written out for the position-only measurement,
+//! symmetrised. Bounds: M and sigma stay above a small positive floor. Divergence (a
+//! non-finite value, a covariance that is no longer positive definite, or innovations far
+//! outside their covariance for many samples in a row) stops the filter with the sample index.
+//!
+//! The paper's parallel, slower filter for F0 and d0 ([`OffsetFilter`]) runs next to it: a
+//! recursive least squares with forgetting on F - (M xdd + d1 xd + d2 xd^3 + sigma/k2) =
+//! F0 + d0 sgn(xd), where d1 = D - 3 d2 xd^2 and sigma/k2 = F_S - F0 (the affine relation).
+//!
+//! The filter step uses only nalgebra static matrices and allocates nothing.
+
+use nalgebra::{SMatrix, SVector};
+use serde::Serialize;
+
+/// The filter state.
+pub type State = SVector<f64, 8>;
+/// An 8x8 matrix.
+pub type Mat8 = SMatrix<f64, 8, 8>;
+
+/// State names with units, in state order (the CSV and JSON keys).
+pub const STATE_NAMES: [&str; 8] = [
+    "x_mm",
+    "xd_mm_per_s",
+    "xdd_mm_per_s2",
+    "sigma_n_per_mm",
+    "d_n_s_per_mm",
+    "m_n_s2_per_mm",
+    "k2_per_mm",
+    "d2_n_s3_per_mm3",
+];
+
+/// Index of each state.
+pub mod idx {
+    /// Position.
+    pub const X: usize = 0;
+    /// Velocity.
+    pub const XD: usize = 1;
+    /// Acceleration.
+    pub const XDD: usize = 2;
+    /// Generalised stiffness.
+    pub const SIGMA: usize = 3;
+    /// Generalised damping.
+    pub const D: usize = 4;
+    /// Generalised inertia.
+    pub const M: usize = 5;
+    /// Exponent rate.
+    pub const K2: usize = 6;
+    /// Cubic damping.
+    pub const D2: usize = 7;
+}
+
+/// How the prediction integrates the model over one sample.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Discretization {
+    /// One classic Runge-Kutta step (default).
+    Rk4,
+    /// The paper's forward Euler, for comparison.
+    Euler,
+}
+
+/// Continuous model derivative f(Z, u).
+pub fn derivative(z: &State, u: f64) -> State {
+    let (xd, xdd, sigma, d, m, k2, d2) = (z[1], z[2], z[3], z[4], z[5], z[6], z[7]);
+    State::from([
+        xd,
+        xdd,
+        (u - sigma * xd - d * xdd) / m,
+        k2 * sigma * xd,
+        6.0 * d2 * xd * xdd,
+        0.0,
+        0.0,
+        0.0,
+    ])
+}
+
+/// Analytic Jacobian A = df/dZ.
+pub fn jacobian(z: &State, u: f64) -> Mat8 {
+    let mut a = Mat8::zeros();
+    a.fixed_rows_mut::<5>(0).copy_from(&jacobian_rows(z, u));
+    a
+}
+
+/// The first five rows of the Jacobian (the others are zero: M, k2 and d2 are constant).
+pub fn jacobian_rows(z: &State, u: f64) -> SMatrix<f64, 5, 8> {
+    let (xd, xdd, sigma, d, m, k2, d2) = (z[1], z[2], z[3], z[4], z[5], z[6], z[7]);
+    let mut a = SMatrix::<f64, 5, 8>::zeros();
+    a[(0, 1)] = 1.0;
+    a[(1, 2)] = 1.0;
+    a[(2, 1)] = -sigma / m;
+    a[(2, 2)] = -d / m;
+    a[(2, 3)] = -xd / m;
+    a[(2, 4)] = -xdd / m;
+    a[(2, 5)] = -(u - sigma * xd - d * xdd) / (m * m);
+    a[(3, 1)] = k2 * sigma;
+    a[(3, 3)] = k2 * xd;
+    a[(3, 6)] = sigma * xd;
+    a[(4, 1)] = 6.0 * d2 * xdd;
+    a[(4, 2)] = 6.0 * d2 * xd;
+    a[(4, 7)] = 6.0 * xd * xdd;
+    a
+}
+
+/// Tuning of the filter.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct EkfSettings {
+    /// Discretization of the prediction.
+    pub discretization: Discretization,
+    /// Continuous process noise spectral density of each state (unit^2 per s).
+    pub q: [f64; 8],
+    /// Position measurement variance (mm^2).
+    pub r_position_mm2: f64,
+    /// Initial standard deviation of each state.
+    pub p0_std: [f64; 8],
+    /// Smallest inertia allowed (N s^2/mm).
+    pub m_floor: f64,
+    /// Smallest stiffness allowed (N/mm).
+    pub sigma_floor: f64,
+    /// An innovation beyond this many of its standard deviations counts as an outlier.
+    pub outlier_sigmas: f64,
+    /// This many outliers in a row stop the filter as diverged.
+    pub max_outliers_in_a_row: usize,
+}
+
+/// Why the filter stopped.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum EkfError {
+    /// Produced by [`Ekf::step`] when a state or the covariance is no longer finite.
+    #[error("the filter diverged at sample {sample} (t = {t_s:.3} s): {what}")]
+    Diverged {
+        /// Sample index (0-based, in the log).
+        sample: usize,
+        /// Its time.
+        t_s: f64,
+        /// What went wrong.
+        what: String,
+    },
+    /// Produced by [`run`] for unusable settings or logs.
+    #[error("{0}")]
+    Input(String),
+}
+
+/// The filter: state, covariance and settings.
+#[derive(Debug, Clone)]
+pub struct Ekf {
+    /// State estimate.
+    pub z: State,
+    /// State covariance.
+    pub p: Mat8,
+    /// Settings.
+    pub settings: EkfSettings,
+    outliers_in_a_row: usize,
+}
+
+/// What one step saw.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepInfo {
+    /// Innovation y - x_predicted (mm).
+    pub innovation_mm: f64,
+    /// Its predicted variance (mm^2).
+    pub innovation_variance_mm2: f64,
+}
+
+impl Ekf {
+    /// A filter at `z0` with the settings' initial covariance.
+    pub fn new(z0: State, settings: EkfSettings) -> Ekf {
+        let p = Mat8::from_diagonal(&State::from(settings.p0_std.map(|s| s * s)));
+        Ekf {
+            z: z0,
+            p,
+            settings,
+            outliers_in_a_row: 0,
+        }
+    }
+
+    /// Prediction over `dt` with the input going from `u0` to `u1` (linearly).
+    pub fn predict(&mut self, u0: f64, u1: f64, dt: f64) {
+        let z = self.z;
+        let a5 = jacobian_rows(&z, u0) * dt;
+        self.z = match self.settings.discretization {
+            Discretization::Euler => z + derivative(&z, u0) * dt,
+            Discretization::Rk4 => {
+                let um = 0.5 * (u0 + u1);
+                let k1 = derivative(&z, u0);
+                let k2 = derivative(&(z + k1 * (0.5 * dt)), um);
+                let k3 = derivative(&(z + k2 * (0.5 * dt)), um);
+                let k4 = derivative(&(z + k3 * dt), u1);
+                z + (k1 + k2 * 2.0 + k3 * 2.0 + k4) * (dt / 6.0)
+            }
+        };
+        // Phi = I + G with G = A T (Euler) or A T + (A T)^2 / 2 (RK4). Only the first five
+        // rows of A are non-zero (M, k2 and d2 are constant), so G is [G5; 0] and
+        // Phi P Phi^T = P + [B; 0] + [B; 0]^T + [[B G5^T, 0], [0, 0]] with B = G5 P.
+        let g5 = match self.settings.discretization {
+            Discretization::Euler => a5,
+            // (A^2) rows 0..5 = A5 A = A5[:, 0..5] A5, since A's other rows are zero.
+            Discretization::Rk4 => a5 + (a5.fixed_columns::<5>(0) * a5) * 0.5,
+        };
+        let b = g5 * self.p;
+        let c = b * g5.transpose();
+        let mut rows = self.p.fixed_rows_mut::<5>(0);
+        rows += b;
+        let mut cols = self.p.fixed_columns_mut::<5>(0);
+        cols += b.transpose();
+        let mut block = self.p.fixed_view_mut::<5, 5>(0, 0);
+        block += c;
+        for i in 0..8 {
+            self.p[(i, i)] += self.settings.q[i] * dt;
+        }
+        self.bound();
+    }
+
+    /// Measurement update with the position `y_mm` (Joseph form for H = [1, 0, ...]).
+    pub fn update(&mut self, y_mm: f64) -> StepInfo {
+        let r = self.settings.r_position_mm2;
+        let s = self.p[(0, 0)] + r;
+        let k: State = self.p.column(0) / s;
+        let nu = y_mm - self.z[0];
+        self.z += k * nu;
+        // Joseph form (I - K H) P (I - K H)^T + K R K^T with H = e0, written out:
+        // P - K P0^T - P0 K^T + (P00 + R) K K^T, where P0 is P's first column.
+        let p0: State = self.p.column(0).into();
+        self.p = self.p - k * p0.transpose() - p0 * k.transpose() + k * k.transpose() * s;
+        self.p = (self.p + self.p.transpose()) * 0.5;
+        self.bound();
+        StepInfo {
+            innovation_mm: nu,
+            innovation_variance_mm2: s,
+        }
+    }
+
+    fn bound(&mut self) {
+        if self.z[idx::M] < self.settings.m_floor {
+            self.z[idx::M] = self.settings.m_floor;
+        }
+        if self.z[idx::SIGMA] < self.settings.sigma_floor {
+            self.z[idx::SIGMA] = self.settings.sigma_floor;
+        }
+    }
+
+    /// One sample: predict from the previous sample, update with `y_mm`, check for divergence.
+    pub fn step(
+        &mut self,
+        u0: f64,
+        u1: f64,
+        dt: f64,
+        y_mm: f64,
+        sample: usize,
+        t_s: f64,
+    ) -> Result<StepInfo, EkfError> {
+        self.predict(u0, u1, dt);
+        let info = self.update(y_mm);
+        let diverged = |what: String| EkfError::Diverged { sample, t_s, what };
+        if !self.z.iter().all(|v| v.is_finite()) || !self.p.iter().all(|v| v.is_finite()) {
+            return Err(diverged("a state or its covariance is not finite".into()));
+        }
+        for (i, name) in STATE_NAMES.iter().enumerate() {
+            let variance = self.p[(i, i)];
+            if variance <= 0.0 {
+                return Err(diverged(format!(
+                    "the variance of {name} is {variance} (no longer positive definite)"
+                )));
+            }
+        }
+        if sample % 64 == 0 && self.p.cholesky().is_none() {
+            return Err(diverged(
+                "the covariance is no longer positive definite".into(),
+            ));
+        }
+        if info.innovation_mm.abs()
+            > self.settings.outlier_sigmas * info.innovation_variance_mm2.sqrt()
+        {
+            self.outliers_in_a_row += 1;
+            if self.outliers_in_a_row >= self.settings.max_outliers_in_a_row {
+                return Err(diverged(format!(
+                    "{} innovations in a row beyond {} standard deviations (last {:.4} mm against {:.4} mm)",
+                    self.outliers_in_a_row,
+                    self.settings.outlier_sigmas,
+                    info.innovation_mm,
+                    info.innovation_variance_mm2.sqrt()
+                )));
+            }
+        } else {
+            self.outliers_in_a_row = 0;
+        }
+        Ok(info)
+    }
+
+    /// Standard deviation of each state.
+    pub fn std(&self) -> State {
+        State::from_fn(|i, _| self.p[(i, i)].max(0.0).sqrt())
+    }
+}
+
+/// The paper's parallel, slower filter for F0 and d0: recursive least squares with forgetting
+/// on r = F0 + d0 sgn(xd).
+#[derive(Debug, Clone, Copy)]
+pub struct OffsetFilter {
+    /// [F0, d0] (N).
+    pub theta: SVector<f64, 2>,
+    /// Their covariance (scaled by the residual variance).
+    pub p: SMatrix<f64, 2, 2>,
+    /// Forgetting factor per sample (1 - dt / memory).
+    pub lambda: f64,
+    /// Residual variance (N^2) for the covariance scale.
+    pub residual_variance: f64,
+}
+
+impl OffsetFilter {
+    /// A filter with memory `memory_s` at sampling interval `dt`, starting from `f0`, `d0`.
+    pub fn new(f0: f64, d0: f64, memory_s: f64, dt: f64, residual_variance: f64) -> Self {
+        OffsetFilter {
+            theta: SVector::<f64, 2>::new(f0, d0),
+            p: SMatrix::<f64, 2, 2>::identity() * 1e3,
+            lambda: (1.0 - dt / memory_s).clamp(0.5, 1.0),
+            residual_variance,
+        }
+    }
+
+    /// Adds one residual r with the friction sign `sgn` (0 at rest: only F0 learns).
+    pub fn update(&mut self, r: f64, sgn: f64) {
+        let h = SVector::<f64, 2>::new(1.0, sgn);
+        let ph = self.p * h;
+        let denom = self.lambda + h.dot(&ph);
+        let k = ph / denom;
+        self.theta += k * (r - h.dot(&self.theta));
+        self.p = (self.p - k * ph.transpose()) / self.lambda;
+        self.p = (self.p + self.p.transpose()) * 0.5;
+    }
+
+    /// Standard deviations of F0 and d0.
+    pub fn std(&self) -> [f64; 2] {
+        [
+            (self.p[(0, 0)] * self.residual_variance).max(0.0).sqrt(),
+            (self.p[(1, 1)] * self.residual_variance).max(0.0).sqrt(),
+        ]
+    }
+}
+
+/// Where the force rate comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ForceRate {
+    /// The derivative of the force through a first-order low-pass filter of this time constant
+    /// (the paper's on-line filter). It lags by about the time constant, so the position is
+    /// delayed by as many samples to match.
+    FirstOrder {
+        /// Time constant (s).
+        time_constant_s: f64,
+    },
+    /// The Savitzky-Golay velocity kernel of identification over the same window: zero phase,
+    /// offline only (it looks half a window ahead).
+    ZeroPhase,
+}
+
+/// The force rate of a force signal sampled every `dt`, aligned with the samples
+/// `first .. first + len` of the log (zero-phase drops half a window at each end).
+pub fn force_rate(force_n: &[f64], dt: f64, how: ForceRate) -> (Vec<f64>, usize) {
+    match how {
+        ForceRate::ZeroPhase => {
+            let d = super::sg::Differentiator::for_rate(1.0 / dt);
+            (d.apply(force_n, dt, super::sg::RATE), d.half)
+        }
+        ForceRate::FirstOrder { time_constant_s } => {
+            let tau = time_constant_s.max(dt);
+            let a = dt / (tau + dt);
+            let mut low = force_n.first().copied().unwrap_or(0.0);
+            let rate: Vec<f64> = force_n
+                .iter()
+                .map(|&f| {
+                    low += a * (f - low);
+                    (f - low) / tau
+                })
+                .collect();
+            // The filter delays the force rate by about tau at the motion's frequencies; the
+            // position is delayed to match (an on-line filter buffers it): sample k's input is
+            // the rate computed at k + delay.
+            let delay = ((tau / dt).round() as usize).min(rate.len());
+            (rate[delay..].to_vec(), 0)
+        }
+    }
+}
+
+/// A run of the filter over a log.
+#[derive(Debug, Clone)]
+pub struct EkfRun {
+    /// Time of each filtered sample (s).
+    pub t_s: Vec<f64>,
+    /// Index in the log of the first filtered sample.
+    pub first_sample: usize,
+    /// State estimate after each sample.
+    pub states: Vec<State>,
+    /// Its standard deviation.
+    pub stds: Vec<State>,
+    /// F0 and d0 from the parallel filter after each sample (N).
+    pub offsets: Vec<[f64; 2]>,
+    /// Their standard deviations.
+    pub offset_stds: Vec<[f64; 2]>,
+    /// The input used (N/s).
+    pub force_rate_n_per_s: Vec<f64>,
+    /// Final filter (state and covariance).
+    pub last: Ekf,
+    /// Final offset filter.
+    pub offset_filter: OffsetFilter,
+    /// Innovations beyond the outlier threshold.
+    pub outliers: usize,
+}
+
+/// Runs the filter from `z0` over `log` (t_s, force_n, position_mm), after computing the force
+/// rate `how`. `offsets0` starts the parallel F0, d0 filter with memory `offset_memory_s`.
+#[allow(clippy::too_many_arguments)]
+pub fn run(
+    t_s: &[f64],
+    force_n: &[f64],
+    position_mm: &[f64],
+    how: ForceRate,
+    z0: State,
+    settings: EkfSettings,
+    offsets0: [f64; 2],
+    offset_memory_s: f64,
+    mut progress: impl FnMut(usize, usize),
+) -> Result<EkfRun, EkfError> {
+    let n = t_s.len();
+    if n < 3 || force_n.len() != n || position_mm.len() != n {
+        return Err(EkfError::Input(format!(
+            "{n} samples; the filter needs at least 3 with force and position"
+        )));
+    }
+    let dt = (t_s[n - 1] - t_s[0]) / (n - 1) as f64;
+    let (rate, first) = force_rate(force_n, dt, how);
+    if rate.len() < 3 {
+        return Err(EkfError::Input(format!(
+            "{n} samples are fewer than the force-rate filter's window"
+        )));
+    }
+    let len = rate.len();
+    let mut ekf = Ekf::new(z0, settings);
+    let mut offsets = OffsetFilter::new(
+        offsets0[0],
+        offsets0[1],
+        offset_memory_s,
+        dt,
+        settings.r_position_mm2.max(1e-12),
+    );
+    let mut out = EkfRun {
+        t_s: Vec::with_capacity(len),
+        first_sample: first,
+        states: Vec::with_capacity(len),
+        stds: Vec::with_capacity(len),
+        offsets: Vec::with_capacity(len),
+        offset_stds: Vec::with_capacity(len),
+        force_rate_n_per_s: rate.clone(),
+        last: ekf.clone(),
+        offset_filter: offsets,
+        outliers: 0,
+    };
+    // The first sample initialises; its measurement is used without a prediction.
+    ekf.update(position_mm[first]);
+    let mut residual_var = 0.0;
+    let mut residual_count = 0.0;
+    for k in 0..len {
+        let i = first + k;
+        if k > 0 {
+            let info = ekf.step(
+                rate[k - 1],
+                rate[k],
+                t_s[i] - t_s[i - 1],
+                position_mm[i],
+                i,
+                t_s[i],
+            )?;
+            if info.innovation_mm.abs()
+                > settings.outlier_sigmas * info.innovation_variance_mm2.sqrt()
+            {
+                out.outliers += 1;
+            }
+        }
+        let z = ekf.z;
+        // Parallel filter: what the impedance model does not explain is F0 + d0 sgn(xd).
+        let d1 = z[idx::D] - 3.0 * z[idx::D2] * z[idx::XD] * z[idx::XD];
+        let spring_minus_f0 = z[idx::SIGMA] / z[idx::K2];
+        let explained = z[idx::M] * z[idx::XDD]
+            + d1 * z[idx::XD]
+            + z[idx::D2] * z[idx::XD].powi(3)
+            + spring_minus_f0;
+        let residual = force_n[i] - explained;
+        let band = 3.0 * ekf.p[(1, 1)].max(0.0).sqrt();
+        let sgn = if z[idx::XD] > band {
+            1.0
+        } else if z[idx::XD] < -band {
+            -1.0
+        } else {
+            0.0
+        };
+        let before = offsets.theta[0] + offsets.theta[1] * sgn;
+        residual_var += (residual - before).powi(2);
+        residual_count += 1.0;
+        offsets.residual_variance = residual_var / residual_count;
+        offsets.update(residual, sgn);
+        out.t_s.push(t_s[i]);
+        out.states.push(z);
+        out.stds.push(ekf.std());
+        out.offsets.push([offsets.theta[0], offsets.theta[1]]);
+        out.offset_stds.push(offsets.std());
+        if k % 65_536 == 0 {
+            progress(k, len);
+        }
+    }
+    out.last = ekf;
+    out.offset_filter = offsets;
+    Ok(out)
+}
+
+/// Where the filter's initial state comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct EkfInit {
+    /// k2 (1/mm) and its standard deviation.
+    pub k2_per_mm: (f64, f64),
+    /// mu (N), for sigma at the first sample.
+    pub mu_n: f64,
+    /// F0 (N) and d0 (N), for the parallel filter.
+    pub f0_n: f64,
+    /// Coulomb friction (N).
+    pub d0_n: f64,
+    /// Inertia (N s^2/mm) and its standard deviation.
+    pub m_n_s2_per_mm: (f64, f64),
+    /// Linear damping (N s/mm) and its standard deviation.
+    pub d1_n_s_per_mm: (f64, f64),
+    /// Cubic damping (N s^3/mm^3) and its standard deviation.
+    pub d2_n_s3_per_mm3: (f64, f64),
+}
+
+impl EkfInit {
+    /// From an identification (the paper's initialisation). Standard deviations are the
+    /// identification's, at least 1 % of k2 and 10 % of M and d1, so that the filter can move.
+    pub fn from_identification(id: &super::identify::Identification) -> EkfInit {
+        let g = |n: &str| id.get(n).and_then(|e| e.value.zip(e.std));
+        let k2 =
+            g("k2_per_mm").unwrap_or((id.k2_quasi_static_per_mm, 0.05 * id.k2_quasi_static_per_mm));
+        let m = g("m_n_s2_per_mm").filter(|(v, _)| *v > 0.0);
+        let d1 = g("d1_n_s_per_mm");
+        EkfInit {
+            k2_per_mm: (k2.0, k2.1.max(0.01 * k2.0.abs())),
+            mu_n: g("mu_n").map_or(1.0, |v| v.0),
+            f0_n: g("f0_n").map_or(0.0, |v| v.0),
+            d0_n: g("d0_n").map_or(0.0, |v| v.0),
+            // Without an identified inertia: a small one, free to move.
+            m_n_s2_per_mm: m.map_or((1e-2, 1e-2), |(v, s)| (v, s.max(0.1 * v))),
+            d1_n_s_per_mm: d1.map_or((0.05, 0.05), |(v, s)| (v, s.max(0.1 * v.abs()).max(1e-3))),
+            d2_n_s3_per_mm3: g("d2_n_s3_per_mm3").map_or((0.0, 1e-3), |(v, s)| (v, s.max(1e-6))),
+        }
+    }
+
+    /// From a designed law: k2 and mu exact to the design, the dynamics unknown (wide).
+    pub fn from_law(law: &crate::law::ExpLaw) -> EkfInit {
+        EkfInit {
+            k2_per_mm: (law.k2_per_mm, 0.05 * law.k2_per_mm),
+            mu_n: law.mu_n,
+            f0_n: law.f0_n,
+            d0_n: 0.0,
+            m_n_s2_per_mm: (1e-2, 1e-2),
+            d1_n_s_per_mm: (0.05, 0.05),
+            d2_n_s3_per_mm3: (0.0, 1e-3),
+        }
+    }
+}
+
+/// Documented default tuning for a log sampled every `dt` with the given sensor noise,
+/// starting from `init`:
+///
+/// - R: the position variance.
+/// - Q: no process noise on x and xd (exact kinematics); on xdd the force-rate noise over one
+///   sample, var(u) dt / (8 M^2), with var(u) the force variance through the force-rate
+///   filter (the factor chosen on simulated runs: from 4 to 16 the results barely move); sigma 1e-4 (N/mm)^2/s and D 1e-8 (N s/mm)^2/s, enough to follow a model that is
+///   not exact; none on the constants M, k2 and d2.
+/// - P0: the position variance; 5 mm/s and 20 mm/s^2 on the velocity and acceleration;
+///   sigma from k2's standard deviation over the stroke (at least 5 %); the init's standard
+///   deviations for D, M, k2 and d2.
+pub fn default_settings(
+    init: &EkfInit,
+    noise: &super::identify::SensorNoise,
+    dt: f64,
+    discretization: Discretization,
+    how: ForceRate,
+) -> EkfSettings {
+    let rate_variance = match how {
+        ForceRate::ZeroPhase => super::sg::Differentiator::for_rate(1.0 / dt).noise_variance(
+            super::sg::RATE,
+            noise.force_variance_n2,
+            dt,
+        ),
+        ForceRate::FirstOrder { time_constant_s } => {
+            // Discrete first-order filter: var(u) = var(F) (2 - a)^-1 a ... approximately var(F) / (2 tau dt).
+            noise.force_variance_n2 / (2.0 * time_constant_s.max(dt) * dt)
+        }
+    };
+    let m = init.m_n_s2_per_mm.0.max(1e-6);
+    EkfSettings {
+        discretization,
+        q: [
+            0.0,
+            0.0,
+            rate_variance * dt / (8.0 * m * m),
+            1e-4,
+            1e-8,
+            0.0,
+            0.0,
+            0.0,
+        ],
+        r_position_mm2: noise.position_variance_mm2.max(1e-12),
+        p0_std: [
+            noise.position_variance_mm2.max(1e-12).sqrt(),
+            5.0,
+            20.0,
+            0.0, // set per log from sigma at the start
+            init.d1_n_s_per_mm.1,
+            init.m_n_s2_per_mm.1,
+            init.k2_per_mm.1,
+            init.d2_n_s3_per_mm3.1,
+        ],
+        m_floor: 1e-6,
+        sigma_floor: 1e-6,
+        outlier_sigmas: 8.0,
+        max_outliers_in_a_row: 50,
+    }
+}
+
+/// The initial state at position `x0_mm` (at rest) and sigma's initial standard deviation.
+pub fn initial_state(init: &EkfInit, x0_mm: f64, stroke_mm: f64) -> (State, f64) {
+    let (k2, k2_std) = init.k2_per_mm;
+    let sigma = k2 * init.mu_n * (k2 * x0_mm).exp();
+    // sigma = k2 mu exp(k2 x): a k2 error moves it by (1 + k2 x) dk2 / k2 relative.
+    let rel = (k2_std / k2.abs().max(1e-12)) * (1.0 + k2.abs() * stroke_mm);
+    let z = State::from([
+        x0_mm,
+        0.0,
+        0.0,
+        sigma,
+        init.d1_n_s_per_mm.0,
+        init.m_n_s2_per_mm.0,
+        k2,
+        init.d2_n_s3_per_mm3.0,
+    ]);
+    (z, sigma * rel.max(0.05))
+}

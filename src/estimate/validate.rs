@@ -1,0 +1,272 @@
+//! `camspring validate`: a built spring's calibration log against its design.
+//!
+//! The log goes through identification (offline) and the EKF (on-line impedance). Three
+//! things are compared with the designed law, each as a relative deviation against the one
+//! `--tolerance`:
+//!
+//! - `k2`: the EKF's converged exponent rate against the designed k2;
+//! - `stiffness_force_line`: over the converged second half of the run, the RMS deviation of
+//!   the estimated stiffness sigma(t) from the designed line sigma = k2 (F - F0) at the
+//!   estimated spring force F = sigma / k2_est + F0_est;
+//! - `force_rms` and `force_max`: the identified characteristic mu exp(k2 x) + F0 against the
+//!   designed one over the deflections the log covers, RMS and maximum relative deviation.
+//!
+//! The verdict passes when every criterion does. `validation.svg` shows the stiffness-force
+//! scatter with the designed line, and the estimates converging over time.
+
+use serde::Serialize;
+
+use super::ekf::{idx, EkfRun};
+use super::identify::Identification;
+use crate::export::plot::{self, Panel, Series};
+use crate::law::ExpLaw;
+
+/// One criterion of the verdict.
+#[derive(Debug, Clone, Serialize)]
+pub struct Criterion {
+    /// Name (k2, stiffness_force_line, force_rms, force_max).
+    pub name: &'static str,
+    /// What it compares.
+    pub what: &'static str,
+    /// Measured relative deviation (percent).
+    pub deviation_percent: f64,
+    /// Allowed (percent).
+    pub tolerance_percent: f64,
+    /// Whether it passes.
+    pub pass: bool,
+}
+
+/// The verdict and what it rests on.
+#[derive(Debug, Clone, Serialize)]
+pub struct Validation {
+    /// All criteria pass.
+    pub pass: bool,
+    /// The criteria.
+    pub criteria: Vec<Criterion>,
+    /// The designed law.
+    pub designed: ExpLaw,
+    /// The identified law (offline).
+    pub identified: ExpLaw,
+    /// The EKF's final k2 (1/mm) and its standard deviation.
+    pub ekf_k2_per_mm: (f64, f64),
+    /// Deflections covered by the log (mm).
+    pub range_mm: (f64, f64),
+}
+
+/// Compares a log's identification and EKF run with the designed law.
+pub fn validate(
+    designed: &ExpLaw,
+    id: &Identification,
+    run: &EkfRun,
+    positions_mm: &[f64],
+    tolerance: f64,
+) -> Validation {
+    let value = |n: &str| id.get(n).and_then(|e| e.value);
+    let identified = ExpLaw {
+        mu_n: value("mu_n").unwrap_or(f64::NAN),
+        k2_per_mm: value("k2_per_mm").unwrap_or(id.k2_quasi_static_per_mm),
+        f0_n: value("f0_n").unwrap_or(f64::NAN),
+    };
+    let tol = 100.0 * tolerance;
+    let mut criteria = Vec::new();
+    let mut add = |name, what, deviation: f64| {
+        criteria.push(Criterion {
+            name,
+            what,
+            deviation_percent: deviation,
+            tolerance_percent: tol,
+            pass: deviation.is_finite() && deviation <= tol,
+        })
+    };
+    let last = run.last.z;
+    let k2_std = run.last.std()[idx::K2];
+    add(
+        "k2",
+        "EKF exponent rate k2 against the design",
+        100.0 * (last[idx::K2] / designed.k2_per_mm - 1.0).abs(),
+    );
+    // Stiffness against force over the converged half.
+    let n = run.states.len();
+    let (mut num, mut den) = (0.0, 0.0);
+    for (z, off) in run.states[n / 2..].iter().zip(&run.offsets[n / 2..]) {
+        let force = z[idx::SIGMA] / z[idx::K2] + off[0];
+        let line = designed.k2_per_mm * (force - designed.f0_n);
+        num += (z[idx::SIGMA] - line).powi(2);
+        den += line * line;
+    }
+    add(
+        "stiffness_force_line",
+        "RMS of estimated stiffness against the designed line sigma = k2 (F - F0)",
+        100.0 * (num / den.max(1e-300)).sqrt(),
+    );
+    // Force-deflection over the measured range.
+    let (lo, hi) = positions_mm
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+            (a.min(x), b.max(x))
+        });
+    let samples = 200;
+    let (mut sq, mut max, mut dsq) = (0.0_f64, 0.0_f64, 0.0_f64);
+    for i in 0..=samples {
+        let x = lo + (hi - lo) * i as f64 / samples as f64;
+        let (fd, fi) = (designed.force_n(x), identified.force_n(x));
+        sq += (fi - fd).powi(2);
+        dsq += fd * fd;
+        max = max.max(((fi - fd) / fd).abs());
+    }
+    add(
+        "force_rms",
+        "RMS of the identified force-deflection curve against the design over the measured range",
+        100.0 * (sq / dsq.max(1e-300)).sqrt(),
+    );
+    add(
+        "force_max",
+        "largest relative deviation of the identified force from the design over the measured range",
+        100.0 * max,
+    );
+    Validation {
+        pass: criteria.iter().all(|c| c.pass),
+        criteria,
+        designed: *designed,
+        identified,
+        ekf_k2_per_mm: (last[idx::K2], k2_std),
+        range_mm: (lo, hi),
+    }
+}
+
+/// The text verdict.
+pub fn format_validation(v: &Validation) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "{}  against F = {:.6} N * exp({:.6} /mm * x) + {:.6} N over x = {:.3} ... {:.3} mm",
+        if v.pass { "PASS" } else { "FAIL" },
+        v.designed.mu_n,
+        v.designed.k2_per_mm,
+        v.designed.f0_n,
+        v.range_mm.0,
+        v.range_mm.1
+    );
+    for c in &v.criteria {
+        let _ = writeln!(
+            s,
+            "  {}  {:<22} {:>8.3} % (tolerance {:.3} %)  {}",
+            if c.pass { "PASS" } else { "FAIL" },
+            c.name,
+            c.deviation_percent,
+            c.tolerance_percent,
+            c.what
+        );
+    }
+    let _ = writeln!(
+        s,
+        "  identified F = {:.6} N * exp({:.6} /mm * x) + {:.6} N; EKF k2 = {:.6} +- {:.6} /mm",
+        v.identified.mu_n,
+        v.identified.k2_per_mm,
+        v.identified.f0_n,
+        v.ekf_k2_per_mm.0,
+        v.ekf_k2_per_mm.1
+    );
+    s
+}
+
+/// `validation.svg`: stiffness against force (scatter and designed line) and the estimates
+/// converging over time.
+pub fn validation_svg(v: &Validation, run: &EkfRun) -> String {
+    let n = run.states.len();
+    let stride = (n / 1500).max(1);
+    let scatter: Vec<(f64, f64)> = run.states[n / 2..]
+        .iter()
+        .zip(&run.offsets[n / 2..])
+        .step_by(stride)
+        .map(|(z, off)| (z[idx::SIGMA] / z[idx::K2] + off[0], z[idx::SIGMA]))
+        .collect();
+    let fmax = scatter.iter().fold(0.0_f64, |m, p| m.max(p.0));
+    let fmin = scatter.iter().fold(f64::INFINITY, |m, p| m.min(p.0));
+    let line: Vec<(f64, f64)> = (0..=50)
+        .map(|i| {
+            let f = fmin + (fmax - fmin) * i as f64 / 50.0;
+            (f, v.designed.k2_per_mm * (f - v.designed.f0_n))
+        })
+        .collect();
+    let stiffness = Panel {
+        title: "Stiffness against force (converged half of the run)".into(),
+        x_label: "spring force F (N)".into(),
+        y_label: "stiffness sigma (N/mm)".into(),
+        series: vec![
+            Series {
+                label: "EKF estimate".into(),
+                points: scatter,
+                color: "#1f77b4",
+                dashed: false,
+                dots: true,
+            },
+            Series {
+                label: format!(
+                    "design: sigma = {:.4} /mm (F - {:.3} N)",
+                    v.designed.k2_per_mm, v.designed.f0_n
+                ),
+                points: line,
+                color: "#000",
+                dashed: false,
+                dots: false,
+            },
+        ],
+        ..Default::default()
+    };
+    let pct = |k: usize, reference: f64| -> Vec<(f64, f64)> {
+        run.states
+            .iter()
+            .zip(&run.t_s)
+            .step_by(stride)
+            .map(|(z, t)| (*t, 100.0 * (z[k] / reference - 1.0)))
+            .collect()
+    };
+    let last = run.last.z;
+    let mut k2 = pct(idx::K2, v.designed.k2_per_mm);
+    let mut m = pct(idx::M, last[idx::M]);
+    // Clip the first transient so that the converged part stays readable.
+    for p in k2.iter_mut().chain(m.iter_mut()) {
+        p.1 = p.1.clamp(-20.0, 20.0);
+    }
+    let t_end = run.t_s.last().copied().unwrap_or(0.0);
+    let tol = v.criteria.first().map_or(0.0, |c| c.tolerance_percent);
+    let convergence = Panel {
+        title: "Estimates over time".into(),
+        x_label: "time t (s)".into(),
+        y_label: "deviation (%)".into(),
+        series: vec![
+            Series {
+                label: "k2 against the design".into(),
+                points: k2,
+                color: "#d62728",
+                dashed: false,
+                dots: false,
+            },
+            Series {
+                label: "M against its final value".into(),
+                points: m,
+                color: "#2ca02c",
+                dashed: false,
+                dots: false,
+            },
+            Series {
+                label: format!("tolerance +-{tol:.2} %"),
+                points: vec![(run.t_s[0], tol), (t_end, tol)],
+                color: "#888",
+                dashed: true,
+                dots: false,
+            },
+            Series {
+                label: String::new(),
+                points: vec![(run.t_s[0], -tol), (t_end, -tol)],
+                color: "#888",
+                dashed: true,
+                dots: false,
+            },
+        ],
+        ..Default::default()
+    };
+    plot::document(&[stiffness, convergence], 620.0, 460.0).to_string()
+}
