@@ -35,6 +35,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         noise: SensorNoise::default(),
         window_s: None,
         outlier_sigmas: None,
+        q: Vec::new(),
+        p0_std: Vec::new(),
+        r_position_mm2: None,
     };
     let est = estimate_log(&log, &options, false)?;
     let z = est.run.last.z;

@@ -34,9 +34,9 @@ use camspring::estimate::sim::{Dynamics, Noise, Profile, SimSettings};
 use camspring::estimate::validate::format_validation;
 use camspring::estimate::{parse_duration_s, parse_fraction, parse_rate_hz};
 use camspring::run::{
-    format_design, load_noise_json, run_design, run_estimate, run_identify, run_noise,
-    run_simulate, run_validate, EstimateInit, EstimateOptions, SimulateOptions, EXIT_BAD_INPUT,
-    EXIT_IO,
+    format_design, load_noise_json, parse_state_override, run_design, run_estimate, run_identify,
+    run_noise, run_simulate, run_validate, EstimateInit, EstimateOptions, SimulateOptions,
+    EXIT_BAD_INPUT, EXIT_IO,
 };
 
 #[derive(Parser, Debug)]
@@ -272,6 +272,16 @@ struct FilterArgs {
     /// Force-rate input: zero-phase (offline) or first-order[:TIME] (the paper's filter; TIME defaults to 0.02s).
     #[arg(long, default_value = "zero-phase")]
     force_rate: String,
+    /// Process noise density of a state, e.g. --q xdd=0.5 --q sigma=1e-3 (repeatable;
+    /// states x, xd, xdd, sigma, d, m, k2, d2; units^2 per s).
+    #[arg(long, value_name = "STATE=VALUE")]
+    q: Vec<String>,
+    /// Initial standard deviation of a state, e.g. --p0 m=0.01 (repeatable).
+    #[arg(long, value_name = "STATE=VALUE")]
+    p0: Vec<String>,
+    /// Position measurement variance R in mm^2 (default: the position noise).
+    #[arg(long)]
+    r: Option<f64>,
 }
 
 impl FilterArgs {
@@ -318,6 +328,22 @@ impl FilterArgs {
             noise,
             window_s,
             outlier_sigmas: None,
+            q: self
+                .q
+                .iter()
+                .map(|t| parse_state_override(t, "--q"))
+                .collect::<Result<_, _>>()?,
+            p0_std: self
+                .p0
+                .iter()
+                .map(|t| parse_state_override(t, "--p0"))
+                .collect::<Result<_, _>>()?,
+            r_position_mm2: match self.r {
+                Some(r) if !(r.is_finite() && r > 0.0) => {
+                    return Err(arg(format!("--r {r}: expected a variance > 0 (mm^2)")))
+                }
+                other => other,
+            },
         })
     }
 }

@@ -384,6 +384,41 @@ pub struct EstimateOptions {
     /// Innovations beyond this many standard deviations count as outliers; 50 in a row stop
     /// the filter (None: 8).
     pub outlier_sigmas: Option<f64>,
+    /// Overrides of the process noise density Q of states (index, value).
+    pub q: Vec<(usize, f64)>,
+    /// Overrides of the initial standard deviation of states (index, value).
+    pub p0_std: Vec<(usize, f64)>,
+    /// Override of the position measurement variance R (mm^2).
+    pub r_position_mm2: Option<f64>,
+}
+
+/// Parses a `STATE=VALUE` override; STATE is a short name (x, xd, xdd, sigma, d, m, k2, d2)
+/// or the unit-bearing one of [`crate::estimate::ekf::STATE_NAMES`].
+pub fn parse_state_override(text: &str, option: &str) -> Result<(usize, f64)> {
+    use crate::estimate::ekf::STATE_NAMES;
+    const SHORT: [&str; 8] = ["x", "xd", "xdd", "sigma", "d", "m", "k2", "d2"];
+    let bad = |why: String| Error::Argument(format!("{option} {text}: {why}"));
+    let (name, value) = text
+        .split_once('=')
+        .ok_or_else(|| bad("expected STATE=VALUE, for example xdd=0.5".into()))?;
+    let name = name.trim();
+    let k = SHORT
+        .iter()
+        .position(|s| s.eq_ignore_ascii_case(name))
+        .or_else(|| STATE_NAMES.iter().position(|s| *s == name))
+        .ok_or_else(|| {
+            bad(format!(
+                "unknown state \"{name}\" (states: {})",
+                SHORT.join(", ")
+            ))
+        })?;
+    let v: f64 = value
+        .trim()
+        .parse()
+        .ok()
+        .filter(|v: &f64| v.is_finite() && *v >= 0.0)
+        .ok_or_else(|| bad(format!("\"{}\" is not a number >= 0", value.trim())))?;
+    Ok((k, v))
 }
 
 /// What `camspring estimate` computed.
@@ -452,6 +487,15 @@ pub fn estimate_log(
     settings.p0_std[ekf::idx::SIGMA] = sigma_std;
     if let Some(k) = opts.outlier_sigmas {
         settings.outlier_sigmas = k;
+    }
+    for &(k, v) in &opts.q {
+        settings.q[k] = v;
+    }
+    for &(k, v) in &opts.p0_std {
+        settings.p0_std[k] = v;
+    }
+    if let Some(r) = opts.r_position_mm2 {
+        settings.r_position_mm2 = r.max(1e-12);
     }
     use std::io::IsTerminal;
     let show = progress

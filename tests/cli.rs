@@ -532,8 +532,37 @@ fn estimate_and_validate_from_the_command_line() {
         .unwrap();
     assert_eq!(k2["pass"], false);
 
+    // Q, P0 and R can be overridden, and the JSON says what was used.
+    let out = camspring(
+        d,
+        &[
+            "estimate",
+            "calib.csv",
+            "-o",
+            "est2.csv",
+            "--json",
+            "--q",
+            "xdd=0.25",
+            "--q",
+            "sigma_n_per_mm=0.002",
+            "--p0",
+            "m=0.02",
+            "--r",
+            "0.02",
+        ],
+    );
+    assert_eq!(out.status.code(), Some(0));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["settings"]["q"][2], 0.25);
+    assert_eq!(v["settings"]["q"][3], 0.002);
+    assert_eq!(v["settings"]["p0_std"][5], 0.02);
+    assert_eq!(v["settings"]["r_position_mm2"], 0.02);
+
     // Bad options are bad input.
     for args in [
+        vec!["estimate", "calib.csv", "--q", "jerk=1"],
+        vec!["estimate", "calib.csv", "--p0", "m=-1"],
+        vec!["estimate", "calib.csv", "--r", "0"],
         vec!["estimate", "calib.csv", "--discretization", "midpoint"],
         vec!["estimate", "calib.csv", "--force-rate", "psychic"],
         vec![

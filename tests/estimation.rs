@@ -47,6 +47,9 @@ fn options(noise: Noise, discretization: Discretization) -> EstimateOptions {
         },
         window_s: None,
         outlier_sigmas: None,
+        q: Vec::new(),
+        p0_std: Vec::new(),
+        r_position_mm2: None,
     }
 }
 
