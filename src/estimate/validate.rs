@@ -47,10 +47,14 @@ pub struct Validation {
     pub designed: ExpLaw,
     /// The identified law (offline).
     pub identified: ExpLaw,
-    /// The EKF's final k2 (1/mm) and its standard deviation.
-    pub ekf_k2_per_mm: (f64, f64),
-    /// Deflections covered by the log (mm).
-    pub range_mm: (f64, f64),
+    /// The EKF's final k2 (1/mm).
+    pub ekf_k2_per_mm: f64,
+    /// Its standard deviation (1/mm).
+    pub ekf_k2_per_mm_std: f64,
+    /// Smallest deflection in the log (mm).
+    pub range_min_mm: f64,
+    /// Largest deflection in the log (mm).
+    pub range_max_mm: f64,
 }
 
 /// Compares a log's identification and EKF run with the designed law.
@@ -129,8 +133,10 @@ pub fn validate(
         criteria,
         designed: *designed,
         identified,
-        ekf_k2_per_mm: (last[idx::K2], k2_std),
-        range_mm: (lo, hi),
+        ekf_k2_per_mm: last[idx::K2],
+        ekf_k2_per_mm_std: k2_std,
+        range_min_mm: lo,
+        range_max_mm: hi,
     }
 }
 
@@ -145,8 +151,8 @@ pub fn format_validation(v: &Validation) -> String {
         v.designed.mu_n,
         v.designed.k2_per_mm,
         v.designed.f0_n,
-        v.range_mm.0,
-        v.range_mm.1
+        v.range_min_mm,
+        v.range_max_mm
     );
     for c in &v.criteria {
         let _ = writeln!(
@@ -165,8 +171,8 @@ pub fn format_validation(v: &Validation) -> String {
         v.identified.mu_n,
         v.identified.k2_per_mm,
         v.identified.f0_n,
-        v.ekf_k2_per_mm.0,
-        v.ekf_k2_per_mm.1
+        v.ekf_k2_per_mm,
+        v.ekf_k2_per_mm_std
     );
     s
 }
