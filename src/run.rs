@@ -588,6 +588,15 @@ pub fn run_validate(
             .unwrap_or(Path::new("."))
             .join("validation.svg")
     });
-    crate::export::write_atomic(&svg_path, validation_svg(&v, &est.run).as_bytes())?;
+    let svg_text = validation_svg(&v, &est.run);
+    let html = crate::export::html::validation_html(
+        &v,
+        &svg_text,
+        &log_path
+            .file_name()
+            .map_or(String::new(), |n| n.to_string_lossy().into_owned()),
+    );
+    crate::export::write_atomic(&svg_path, svg_text.as_bytes())?;
+    crate::export::write_atomic(&svg_path.with_file_name("validation.html"), html.as_bytes())?;
     Ok((v, svg_path))
 }

@@ -31,6 +31,7 @@ fn default_design_writes_all_outputs_and_exits_zero() {
     assert!(stdout.contains("alpha = 1.3201914760"), "{stdout}");
     for f in [
         "design.json",
+        "report.html",
         "profile.csv",
         "force.svg",
         "profile.svg",

@@ -6,6 +6,7 @@
 
 pub mod drawing;
 pub mod dxf;
+pub mod html;
 pub mod plot;
 pub mod step;
 pub mod stl;
@@ -461,7 +462,13 @@ pub fn profile_svg(design: &Design) -> String {
 }
 
 /// Names of the design files [`write_design`] always writes.
-pub const DESIGN_OUTPUTS: [&str; 4] = ["design.json", "profile.csv", "force.svg", "profile.svg"];
+pub const DESIGN_OUTPUTS: [&str; 5] = [
+    "design.json",
+    "report.html",
+    "profile.csv",
+    "force.svg",
+    "profile.svg",
+];
 
 /// The G-code program and tool-path plot of a part, in memory.
 pub fn gcode_files(
@@ -663,12 +670,15 @@ pub fn write_design(design: &Design, dir: &Path) -> Result<(DesignSummary, Vec<P
         what: "design.json",
         message: e.to_string(),
     })?;
+    let (force, profile) = (force_svg(design), profile_svg(design));
+    let report = html::report_html(design, &summary, &force, &profile);
     let mut files: Vec<(&str, Vec<u8>)> = vec![
         ("profile.csv", profile_csv(design)?),
-        ("force.svg", force_svg(design).into_bytes()),
-        ("profile.svg", profile_svg(design).into_bytes()),
+        ("force.svg", force.into_bytes()),
+        ("profile.svg", profile.into_bytes()),
     ];
     files.extend(part_files);
+    files.push(("report.html", report.into_bytes()));
     // design.json last: its presence with this run's content marks a complete set.
     files.push(("design.json", json));
     let mut written = Vec::new();

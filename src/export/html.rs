@@ -1,0 +1,335 @@
+//! Self-contained HTML pages a designer can send to a colleague: `report.html` for a design and
+//! `validation.html` for a calibration check. Inline CSS and inline SVG only: no scripts, no
+//! network, one file.
+
+use std::fmt::Write as _;
+
+use serde_json::Value;
+
+use super::plot::{self, Panel, Series};
+use super::DesignSummary;
+use crate::design::Design;
+
+const STYLE: &str = "body{font-family:system-ui,-apple-system,Segoe UI,Helvetica,Arial,sans-serif;\
+max-width:1280px;margin:2em auto;padding:0 1em;color:#222;line-height:1.4}\
+h1{margin-bottom:.2em}h2{border-bottom:1px solid #ccc;padding-bottom:.2em;margin-top:2em}\
+table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #ccc;padding:.25em .6em;\
+text-align:left;vertical-align:top}th{background:#f4f4f4}td.num{text-align:right;\
+font-variant-numeric:tabular-nums}.pass{color:#fff;background:#2a7d2a}.warn{color:#000;\
+background:#f0c000}.fail{color:#fff;background:#b22222}.badge{padding:.1em .5em;\
+border-radius:.3em;font-weight:bold}figure{margin:1em 0}figure svg{max-width:100%;height:auto;\
+border:1px solid #eee}nav a{margin-right:1em}code{background:#f4f4f4;padding:0 .2em}";
+
+/// Escapes text for HTML.
+pub fn escape(text: &str) -> String {
+    text.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+fn badge(status: &str) -> String {
+    let class = match status {
+        "pass" | "PASS" => "pass",
+        "warn" | "WARN" => "warn",
+        _ => "fail",
+    };
+    format!(
+        "<span class=\"badge {class}\">{}</span>",
+        escape(&status.to_uppercase())
+    )
+}
+
+/// An SVG document as an inline figure (the XML declaration, if any, dropped).
+fn figure(svg: &str, caption: &str) -> String {
+    let body = svg
+        .trim_start()
+        .strip_prefix("<?xml")
+        .and_then(|rest| rest.split_once("?>").map(|(_, b)| b))
+        .unwrap_or(svg);
+    format!(
+        "<figure>{}<figcaption>{}</figcaption></figure>\n",
+        body.trim(),
+        escape(caption)
+    )
+}
+
+/// Rows `key | value` of a JSON object, nested keys joined with dots.
+fn json_rows(prefix: &str, value: &Value, out: &mut String) {
+    match value {
+        Value::Object(map) => {
+            for (k, v) in map {
+                let key = if prefix.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{prefix}.{k}")
+                };
+                json_rows(&key, v, out);
+            }
+        }
+        Value::Array(items) if items.iter().all(|v| !v.is_object() && !v.is_array()) => {
+            let text: Vec<String> = items.iter().map(scalar).collect();
+            let _ = writeln!(
+                out,
+                "<tr><td><code>{}</code></td><td>{}</td></tr>",
+                escape(prefix),
+                escape(&text.join(", "))
+            );
+        }
+        Value::Array(items) => {
+            for (i, v) in items.iter().enumerate() {
+                json_rows(&format!("{prefix}[{i}]"), v, out);
+            }
+        }
+        v => {
+            let _ = writeln!(
+                out,
+                "<tr><td><code>{}</code></td><td class=\"num\">{}</td></tr>",
+                escape(prefix),
+                escape(&scalar(v))
+            );
+        }
+    }
+}
+
+fn scalar(v: &Value) -> String {
+    match v {
+        Value::Null => "—".into(),
+        Value::String(s) => s.clone(),
+        Value::Number(n) => match n.as_f64() {
+            Some(x) if x.fract() != 0.0 => format!("{}", (x * 1e9).round() / 1e9),
+            _ => n.to_string(),
+        },
+        other => other.to_string(),
+    }
+}
+
+fn json_table(value: &Value) -> String {
+    let mut rows = String::new();
+    json_rows("", value, &mut rows);
+    format!("<table><tr><th>key</th><th>value</th></tr>\n{rows}</table>\n")
+}
+
+/// Pressure angle and contact stress along the stroke (two panels).
+pub fn stroke_svg(design: &Design) -> String {
+    let angle = Panel {
+        title: "Pressure angle along the stroke".into(),
+        x_label: "deflection x (mm)".into(),
+        y_label: "pressure angle theta (deg)".into(),
+        series: vec![Series {
+            label: "pressure angle".into(),
+            points: design
+                .forces
+                .iter()
+                .map(|f| (f.x_mm, f.pressure_angle_deg))
+                .collect(),
+            color: "#1f77b4",
+            dashed: false,
+            dots: false,
+        }],
+        ..Default::default()
+    };
+    let stress = Panel {
+        title: "Peak Hertz contact stress on one roller".into(),
+        x_label: "deflection x (mm)".into(),
+        y_label: "contact stress (MPa)".into(),
+        series: vec![Series {
+            label: "contact stress".into(),
+            points: design
+                .forces
+                .iter()
+                .filter_map(|f| f.contact_stress_mpa.map(|s| (f.x_mm, s)))
+                .collect(),
+            color: "#d62728",
+            dashed: false,
+            dots: false,
+        }],
+        ..Default::default()
+    };
+    plot::document(&[angle, stress], 560.0, 420.0).to_string()
+}
+
+/// `report.html` of a design.
+pub fn report_html(
+    design: &Design,
+    summary: &DesignSummary,
+    force_svg: &str,
+    profile_svg: &str,
+) -> String {
+    let mut h = String::with_capacity(256 * 1024);
+    let name = escape(&summary.name);
+    let status = summary.status.as_str();
+    let _ = write!(
+        h,
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\
+         <meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\
+         <title>camspring report: {name}</title><style>{STYLE}</style></head><body>\n\
+         <h1>Exponential cam spring '{name}' {}</h1>\n\
+         <p>camspring {} design report. Every number carries its unit; the same data is in \
+         <a href=\"design.json\">design.json</a>.</p>\n\
+         <nav><a href=\"#law\">Law</a><a href=\"#curves\">Force</a><a href=\"#profile\">Cam</a>\
+         <a href=\"#stroke\">Pressure angle and stress</a><a href=\"#checks\">Checks</a>\
+         <a href=\"#part\">Part</a><a href=\"#files\">Files</a><a href=\"#spec\">Spec</a></nav>\n",
+        badge(status),
+        summary.camspring_version
+    );
+
+    // Law.
+    let law = &summary.law;
+    let _ = write!(
+        h,
+        "<h2 id=\"law\">Force law</h2>\n<p><b>F(x) = {:.7} N &middot; exp({:.7} /mm &middot; x) + {:.7} N</b>",
+        law.mu_n, law.k2_per_mm, law.f0_n
+    );
+    if let Some(alpha) = law.alpha {
+        let _ = write!(h, ", alpha = k2 &middot; L0 = {alpha:.10}");
+    }
+    let _ = writeln!(
+        h,
+        ". F(0) = {:.4} N, F(Xmax) = {:.4} N.</p>",
+        law.force_at_zero_n, law.force_at_xmax_n
+    );
+    if let Some(r) = &law.residuals {
+        let value = serde_json::to_value(r).unwrap_or(Value::Null);
+        let _ = write!(
+            h,
+            "<p>Residuals of the design conditions (relative):</p>{}",
+            json_table(&value)
+        );
+    }
+    h.push_str(
+        "<p>Note on the paper's printed values: the paper prints alpha = 1.3288, which is not a \
+         root of its eq. (5) (the residual there is about -3.9); the law above is the exact root \
+         for this spec, derived in <code>shared/notes/physics.md</code> and checked by the \
+         test suite.</p>\n",
+    );
+
+    // Curves.
+    h.push_str("<h2 id=\"curves\">Force and stiffness</h2>\n");
+    h.push_str(&figure(
+        force_svg,
+        "Designed force, predicted loading and unloading force (friction hysteresis) against \
+         deflection; stiffness against force.",
+    ));
+    h.push_str("<h2 id=\"profile\">Cam profile</h2>\n");
+    h.push_str(&figure(
+        profile_svg,
+        "Pitch curve (roller centre), machined cam surface and the roller at five positions, to scale.",
+    ));
+    h.push_str("<h2 id=\"stroke\">Pressure angle and contact stress</h2>\n");
+    h.push_str(&figure(
+        &stroke_svg(design),
+        "Pressure angle and peak Hertz contact stress along the stroke.",
+    ));
+
+    // Checks.
+    h.push_str(
+        "<h2 id=\"checks\">Checks</h2>\n<table><tr><th>status</th><th>check</th><th>value</th>\
+         <th>limit</th><th>at x</th><th>finding</th><th>advice</th></tr>\n",
+    );
+    for c in &summary.checks {
+        let value = c.value.map_or("—".into(), |v| format!("{v:.4} {}", c.unit));
+        let at = c.at_x_mm.map_or("—".into(), |x| format!("{x:.3} mm"));
+        let _ = writeln!(
+            h,
+            "<tr><td>{}</td><td>{}</td><td class=\"num\">{}</td><td class=\"num\">{:.4} {}</td>\
+             <td class=\"num\">{}</td><td>{}</td><td>{}</td></tr>",
+            badge(c.status.as_str()),
+            escape(c.name),
+            escape(&value),
+            c.limit,
+            escape(c.unit),
+            escape(&at),
+            escape(&c.message),
+            escape(c.advice.as_deref().unwrap_or(""))
+        );
+    }
+    h.push_str("</table>\n");
+
+    // Part.
+    h.push_str("<h2 id=\"part\">Part</h2>\n");
+    match (&summary.part, &summary.part_refused) {
+        (Some(part), _) => {
+            let value = serde_json::to_value(part).unwrap_or(Value::Null);
+            h.push_str(&json_table(&value));
+        }
+        (None, Some(why)) => {
+            let _ = writeln!(h, "<p>No part files: {}</p>", escape(why));
+        }
+        (None, None) => h.push_str("<p>No part.</p>\n"),
+    }
+    if let Some(g) = &summary.gcode {
+        let value = serde_json::to_value(g).unwrap_or(Value::Null);
+        h.push_str("<p>G-code program:</p>");
+        h.push_str(&json_table(&value));
+    }
+    if let Some(why) = &summary.gcode_refused {
+        let _ = writeln!(h, "<p>{}</p>", escape(why));
+    }
+
+    // Files.
+    h.push_str("<h2 id=\"files\">Files</h2>\n<ul>\n");
+    for f in &summary.outputs {
+        let _ = writeln!(h, "<li><a href=\"{0}\">{0}</a></li>", escape(f));
+    }
+    h.push_str("</ul>\n");
+
+    // Spec.
+    let spec = serde_json::to_value(&summary.spec).unwrap_or(Value::Null);
+    h.push_str("<h2 id=\"spec\">Spec (as understood, default units)</h2>\n");
+    h.push_str(&json_table(&spec));
+    h.push_str("</body></html>\n");
+    h
+}
+
+/// `validation.html`: the verdict, the criteria and the plots of `validation.svg`.
+pub fn validation_html(
+    v: &crate::estimate::validate::Validation,
+    validation_svg: &str,
+    log_name: &str,
+) -> String {
+    let mut h = String::with_capacity(128 * 1024);
+    let verdict = if v.pass { "PASS" } else { "FAIL" };
+    let _ = write!(
+        h,
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\
+         <title>camspring validation: {log}</title><style>{STYLE}</style></head><body>\n\
+         <h1>Validation of {log} {}</h1>\n\
+         <p>Designed law: F(x) = {:.7} N &middot; exp({:.7} /mm &middot; x) + {:.7} N. \
+         Identified from the log: F(x) = {:.7} N &middot; exp({:.7} /mm &middot; x) + {:.7} N. \
+         EKF k2 = {:.7} &plusmn; {:.7} /mm. Deflections in the log: {:.3} to {:.3} mm.</p>\n\
+         <h2>Criteria</h2>\n<table><tr><th>status</th><th>criterion</th><th>deviation</th>\
+         <th>tolerance</th><th>what</th></tr>\n",
+        badge(verdict),
+        v.designed.mu_n,
+        v.designed.k2_per_mm,
+        v.designed.f0_n,
+        v.identified.mu_n,
+        v.identified.k2_per_mm,
+        v.identified.f0_n,
+        v.ekf_k2_per_mm,
+        v.ekf_k2_per_mm_std,
+        v.range_min_mm,
+        v.range_max_mm,
+        log = escape(log_name),
+    );
+    for c in &v.criteria {
+        let _ = writeln!(
+            h,
+            "<tr><td>{}</td><td>{}</td><td class=\"num\">{:.3} %</td><td class=\"num\">{:.3} %</td><td>{}</td></tr>",
+            badge(if c.pass { "pass" } else { "fail" }),
+            escape(c.name),
+            c.deviation_percent,
+            c.tolerance_percent,
+            escape(c.what)
+        );
+    }
+    h.push_str("</table>\n<h2>Stiffness against force, and convergence</h2>\n");
+    h.push_str(&figure(
+        validation_svg,
+        "Left: EKF stiffness against spring force over the converged half of the run, with the \
+         designed line. Right: k2 against the design and M against its final value over time.",
+    ));
+    h.push_str("</body></html>\n");
+    h
+}
