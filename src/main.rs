@@ -21,7 +21,7 @@ macro_rules! outln {
 }
 use std::process::ExitCode;
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, Parser, Subcommand};
 
 use camspring::estimate::ekf::{Discretization, ForceRate};
 use camspring::estimate::identify::SensorNoise;
@@ -38,6 +38,7 @@ use camspring::run::{
     run_noise, run_simulate, run_validate, EstimateInit, EstimateOptions, SimulateOptions,
     EXIT_BAD_INPUT, EXIT_IO,
 };
+use camspring::spec::STARTER_SPEC_TOML;
 
 #[derive(Parser, Debug)]
 #[command(name = "camspring", version, about = "Design exponential cam springs and check them", long_about = None)]
@@ -48,6 +49,39 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
+    /// Write a commented starter spec to edit (every key, with its default and unit).
+    ///
+    /// Examples:
+    ///   camspring init my.toml && camspring design my.toml
+    #[command(verbatim_doc_comment)]
+    Init {
+        /// Spec file to write.
+        path: PathBuf,
+        /// Overwrite an existing file.
+        #[arg(long)]
+        force: bool,
+    },
+    /// Print a shell completion script.
+    ///
+    /// Examples:
+    ///   camspring completions bash > ~/.local/share/bash-completion/completions/camspring
+    ///   camspring completions zsh > ~/.zfunc/_camspring
+    #[command(verbatim_doc_comment)]
+    Completions {
+        /// Shell: bash, zsh, fish, elvish or powershell.
+        shell: clap_complete::Shell,
+    },
+    /// Write man pages (camspring.1 and one per subcommand), or print camspring.1.
+    ///
+    /// Examples:
+    ///   camspring man -o /usr/local/share/man/man1
+    ///   camspring man | man -l -
+    #[command(verbatim_doc_comment)]
+    Man {
+        /// Folder to write the pages to (default: print camspring.1 on stdout).
+        #[arg(short, long)]
+        out: Option<PathBuf>,
+    },
     /// Solve the law, synthesise the cam, run the checks and write the outputs.
     ///
     /// Examples:
@@ -380,6 +414,47 @@ impl Columns {
     }
 }
 
+/// `camspring man`: camspring.1 on stdout, or every page into a folder.
+fn man_pages(out: Option<&std::path::Path>) -> ExitCode {
+    let cmd = Cli::command();
+    let render = |c: &clap::Command| -> std::io::Result<Vec<u8>> {
+        let mut buf = Vec::new();
+        clap_mangen::Man::new(c.clone()).render(&mut buf)?;
+        Ok(buf)
+    };
+    let Some(dir) = out else {
+        return match render(&cmd) {
+            Ok(page) => {
+                let _ = std::io::stdout().lock().write_all(&page);
+                ExitCode::SUCCESS
+            }
+            Err(e) => {
+                eprintln!("error: cannot render the man page: {e}");
+                ExitCode::from(EXIT_IO)
+            }
+        };
+    };
+    let mut pages = vec![("camspring.1".to_string(), cmd.clone())];
+    for sub in cmd.get_subcommands() {
+        let name: &'static str =
+            Box::leak(format!("camspring-{}", sub.get_name()).into_boxed_str());
+        pages.push((format!("{name}.1"), sub.clone().name(name)));
+    }
+    for (file, c) in pages {
+        let result = render(&c)
+            .map_err(|e| camspring::Error::Encode {
+                what: "man page",
+                message: e.to_string(),
+            })
+            .and_then(|page| camspring::export::write_atomic(&dir.join(&file), &page));
+        match result {
+            Ok(()) => outln!("  {}", dir.join(&file).display()),
+            Err(e) => return fail(&e),
+        }
+    }
+    ExitCode::SUCCESS
+}
+
 fn fail(e: &camspring::Error) -> ExitCode {
     // Every message already carries its cause (key, line, OS error).
     eprintln!("error: {e}");
@@ -448,6 +523,34 @@ fn simulate(
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
+        Command::Init { path, force } => {
+            if path.exists() && !force {
+                eprintln!(
+                    "error: {} exists; choose another name or pass --force to overwrite it",
+                    path.display()
+                );
+                return ExitCode::from(EXIT_BAD_INPUT);
+            }
+            match camspring::export::write_atomic(&path, STARTER_SPEC_TOML.as_bytes()) {
+                Ok(()) => {
+                    outln!(
+                        "wrote {}; edit it, then: camspring design {}",
+                        path.display(),
+                        path.display()
+                    );
+                    ExitCode::SUCCESS
+                }
+                Err(e) => fail(&e),
+            }
+        }
+        Command::Completions { shell } => {
+            let mut cmd = Cli::command();
+            let mut buf = Vec::new();
+            clap_complete::generate(shell, &mut cmd, "camspring", &mut buf);
+            let _ = std::io::stdout().lock().write_all(&buf);
+            ExitCode::SUCCESS
+        }
+        Command::Man { out } => man_pages(out.as_deref()),
         Command::Design { spec, out, json } => match run_design(spec.as_deref(), out.as_deref()) {
             Ok(run) => {
                 if json {

@@ -15,6 +15,9 @@ use crate::cam::follower::{
 use crate::law::{ExpLaw, LawTargets};
 use crate::units::{parse_quantity, Dimension, UnitError};
 
+/// The commented starter spec that `camspring init` writes (a copy of `specs/starter.toml`).
+pub const STARTER_SPEC_TOML: &str = include_str!("../specs/starter.toml");
+
 /// The built-in default spec (`specs/paper.toml`): the paper's law on two opposed followers.
 pub const DEFAULT_SPEC_TOML: &str = include_str!("../specs/paper.toml");
 

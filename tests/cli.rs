@@ -577,3 +577,70 @@ fn estimate_and_validate_from_the_command_line() {
         assert_eq!(camspring(d, &args).status.code(), Some(2), "{args:?}");
     }
 }
+
+#[test]
+fn init_writes_a_starter_spec_whose_every_optional_key_is_valid() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let out = camspring(d, &["init", "my.toml"]);
+    assert_eq!(out.status.code(), Some(0));
+    let out = camspring(d, &["design", "my.toml", "--json"]);
+    assert_eq!(out.status.code(), Some(0));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!((v["law"]["alpha"].as_f64().unwrap() - 1.3201914760).abs() < 1e-9);
+    // Never overwrites without --force.
+    assert_eq!(camspring(d, &["init", "my.toml"]).status.code(), Some(2));
+    assert_eq!(
+        camspring(d, &["init", "my.toml", "--force"]).status.code(),
+        Some(0)
+    );
+    // Uncomment every optional key (except the given-law and pin-friction alternatives):
+    // the spec is still valid, so the comments show real keys and values.
+    let text = std::fs::read_to_string(d.join("my.toml")).unwrap();
+    let mut full = String::new();
+    for line in text.lines() {
+        let body = line.strip_prefix("# ").unwrap_or(line);
+        let is_key = body.starts_with('[')
+            || body
+                .split_once(" = ")
+                .is_some_and(|(k, _)| k.chars().all(|c| c.is_ascii_lowercase() || c == '_'));
+        let alternative = ["mu ", "k2 ", "f0 ", "pin_", "rolling_"]
+            .iter()
+            .any(|p| body.starts_with(p));
+        if line.starts_with("# ") && is_key && !alternative {
+            full.push_str(body);
+        } else {
+            full.push_str(line);
+        }
+        full.push('\n');
+    }
+    assert!(full.matches("\n[").count() >= 6, "{full}");
+    std::fs::write(d.join("full.toml"), &full).unwrap();
+    let out = camspring(d, &["design", "full.toml"]);
+    assert_eq!(out.status.code(), Some(0), "{full}");
+}
+
+#[test]
+fn completions_and_man_pages_come_from_the_clap_definitions() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let out = camspring(d, &["completions", "bash"]);
+    assert_eq!(out.status.code(), Some(0));
+    let script = String::from_utf8(out.stdout).unwrap();
+    for sub in [
+        "design", "simulate", "noise", "identify", "estimate", "validate", "init",
+    ] {
+        assert!(script.contains(sub), "{sub}");
+    }
+    assert!(script.contains("--discretization"));
+    let out = camspring(d, &["man", "-o", "man"]);
+    assert_eq!(out.status.code(), Some(0));
+    let page = std::fs::read_to_string(d.join("man/camspring-validate.1")).unwrap();
+    assert!(page.starts_with(".ie") || page.contains(".TH"), "{page}");
+    assert!(page.contains("tolerance"));
+    assert!(d.join("man/camspring.1").exists());
+    assert_eq!(
+        camspring(d, &["completions", "tcsh"]).status.code(),
+        Some(2)
+    );
+}
