@@ -60,6 +60,9 @@ enum Command {
         /// Overwrite an existing file.
         #[arg(long)]
         force: bool,
+        /// Print what was written as JSON on stdout.
+        #[arg(long)]
+        json: bool,
     },
     /// Print a shell completion script.
     ///
@@ -118,6 +121,9 @@ enum Command {
         /// Truth JSON to write (default: the log's name with .truth.json).
         #[arg(long)]
         truth: Option<PathBuf>,
+        /// Print what was written as JSON on stdout.
+        #[arg(long)]
+        json: bool,
         /// Motion: sines, ramp-hold, steps or static.
         #[arg(long, default_value = "sines")]
         profile: String,
@@ -455,6 +461,19 @@ fn man_pages(out: Option<&std::path::Path>) -> ExitCode {
     ExitCode::SUCCESS
 }
 
+/// Colours the status words PASS, WARN, FAIL and REFUSED, only when stdout is a terminal and
+/// NO_COLOR is not set (https://no-color.org).
+fn colour(text: &str) -> String {
+    use std::io::IsTerminal;
+    if !std::io::stdout().is_terminal() || std::env::var_os("NO_COLOR").is_some() {
+        return text.to_string();
+    }
+    text.replace("PASS", "\x1b[32mPASS\x1b[0m")
+        .replace("WARN", "\x1b[33mWARN\x1b[0m")
+        .replace("FAIL", "\x1b[31mFAIL\x1b[0m")
+        .replace("REFUSED", "\x1b[31mREFUSED\x1b[0m")
+}
+
 fn fail(e: &camspring::Error) -> ExitCode {
     // Every message already carries its cause (key, line, OS error).
     eprintln!("error: {e}");
@@ -523,7 +542,7 @@ fn simulate(
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
-        Command::Init { path, force } => {
+        Command::Init { path, force, json } => {
             if path.exists() && !force {
                 eprintln!(
                     "error: {} exists; choose another name or pass --force to overwrite it",
@@ -532,6 +551,7 @@ fn main() -> ExitCode {
                 return ExitCode::from(EXIT_BAD_INPUT);
             }
             match camspring::export::write_atomic(&path, STARTER_SPEC_TOML.as_bytes()) {
+                Ok(()) if json => print_json(&serde_json::json!({ "spec": path })),
                 Ok(()) => {
                     outln!(
                         "wrote {}; edit it, then: camspring design {}",
@@ -562,7 +582,7 @@ fn main() -> ExitCode {
                         }
                     }
                 } else {
-                    out!("{}", format_design(&run));
+                    out!("{}", colour(&format_design(&run)));
                 }
                 ExitCode::from(run.exit_code())
             }
@@ -572,6 +592,7 @@ fn main() -> ExitCode {
             spec,
             out,
             truth,
+            json,
             profile,
             duration,
             rate,
@@ -596,6 +617,12 @@ fn main() -> ExitCode {
             match simulate(
                 spec, out, truth, &profile, &duration, &rate, seed, dynamics, noise,
             ) {
+                Ok(run) if json => print_json(&serde_json::json!({
+                    "log": run.log_path,
+                    "truth": run.truth_path,
+                    "samples": run.samples,
+                    "law": run.law,
+                })),
                 Ok(run) => {
                     outln!(
                         "simulated {} samples of F = {:.6} N * exp({:.6} /mm * x) + {:.6} N",
@@ -718,7 +745,7 @@ fn main() -> ExitCode {
                     if json {
                         let _ = print_json(&v);
                     } else {
-                        out!("{}", format_validation(&v));
+                        out!("{}", colour(&format_validation(&v)));
                         outln!("  plot: {}", path.display());
                     }
                     code

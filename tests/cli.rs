@@ -644,3 +644,25 @@ fn completions_and_man_pages_come_from_the_clap_definitions() {
         Some(2)
     );
 }
+
+#[test]
+fn colour_only_on_a_terminal_and_never_with_no_color() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let bin = env!("CARGO_BIN_EXE_camspring");
+    let piped = camspring(d, &["design"]);
+    assert!(!String::from_utf8_lossy(&piped.stdout).contains('\x1b'));
+    let tty = |no_color: bool| {
+        let mut cmd = Command::new("script");
+        cmd.args(["-qec", &format!("{bin} design"), "/dev/null"])
+            .current_dir(d);
+        if no_color {
+            cmd.env("NO_COLOR", "1");
+        } else {
+            cmd.env_remove("NO_COLOR");
+        }
+        String::from_utf8_lossy(&cmd.output().expect("util-linux script").stdout).into_owned()
+    };
+    assert!(tty(false).contains("\x1b[32mPASS\x1b[0m"));
+    assert!(!tty(true).contains('\x1b'));
+}
