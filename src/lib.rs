@@ -29,6 +29,7 @@ pub mod law;
 pub mod part;
 pub mod run;
 pub mod spec;
+pub mod sweep;
 pub mod toolpath;
 pub mod units;
 

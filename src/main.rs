@@ -35,8 +35,8 @@ use camspring::estimate::validate::format_validation;
 use camspring::estimate::{parse_duration_s, parse_fraction, parse_rate_hz};
 use camspring::run::{
     format_design, load_noise_json, parse_state_override, run_design, run_estimate, run_identify,
-    run_noise, run_simulate, run_validate, EstimateInit, EstimateOptions, SimulateOptions,
-    EXIT_BAD_INPUT, EXIT_IO,
+    run_noise, run_simulate, run_sweep, run_validate, EstimateInit, EstimateOptions,
+    SimulateOptions, EXIT_BAD_INPUT, EXIT_IO,
 };
 use camspring::spec::STARTER_SPEC_TOML;
 
@@ -49,6 +49,28 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
+    /// Explore a grid of follower designs in parallel: pressure angle, lift and contact stress.
+    ///
+    /// Writes sweep.csv (one row per design) and sweep.svg.
+    ///
+    /// Examples:
+    ///   camspring sweep specs/paper.toml --vary spring_rate=2..20 --vary preload=0..10
+    ///   camspring sweep specs/paper.toml --vary roller_radius=1..5:9 --vary friction=0,0.01,0.05
+    #[command(verbatim_doc_comment)]
+    Sweep {
+        /// Spec file (TOML); the built-in default spec when omitted.
+        spec: Option<PathBuf>,
+        /// An axis: KEY=A..B (10 values), KEY=A..B:N or KEY=V1,V2,...; keys spring_rate (N/mm),
+        /// preload (mm), roller_radius (mm), friction. Repeat for up to 3 axes.
+        #[arg(long, required = true)]
+        vary: Vec<String>,
+        /// Output folder (default out/<spec name>/sweep).
+        #[arg(short, long)]
+        out: Option<PathBuf>,
+        /// Print every grid point as JSON on stdout.
+        #[arg(long)]
+        json: bool,
+    },
     /// Write a commented starter spec to edit (every key, with its default and unit).
     ///
     /// Examples:
@@ -571,6 +593,43 @@ fn main() -> ExitCode {
             ExitCode::SUCCESS
         }
         Command::Man { out } => man_pages(out.as_deref()),
+        Command::Sweep {
+            spec,
+            vary,
+            out,
+            json,
+        } => {
+            let run = vary
+                .iter()
+                .map(|v| camspring::sweep::parse_axis(v).map_err(camspring::Error::Argument))
+                .collect::<Result<Vec<_>, _>>()
+                .and_then(|axes| run_sweep(spec.as_deref(), &axes, out.as_deref()));
+            match run {
+                Ok(run) if json => print_json(&run.points),
+                Ok(run) => {
+                    let n = run.points.len();
+                    let count = |s: camspring::cam::checks::Status| {
+                        run.points
+                            .iter()
+                            .filter(|p| p.result.as_ref().is_ok_and(|r| r.status == s))
+                            .count()
+                    };
+                    use camspring::cam::checks::Status;
+                    outln!(
+                        "{n} designs: {} pass, {} warn, {} fail, {} without a design",
+                        count(Status::Pass),
+                        count(Status::Warn),
+                        count(Status::Fail),
+                        run.points.iter().filter(|p| p.result.is_err()).count()
+                    );
+                    for p in &run.written {
+                        outln!("  {}", p.display());
+                    }
+                    ExitCode::SUCCESS
+                }
+                Err(e) => fail(&e),
+            }
+        }
         Command::Design { spec, out, json } => match run_design(spec.as_deref(), out.as_deref()) {
             Ok(run) => {
                 if json {

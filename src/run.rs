@@ -600,3 +600,61 @@ pub fn run_validate(
     crate::export::write_atomic(&svg_path.with_file_name("validation.html"), html.as_bytes())?;
     Ok((v, svg_path))
 }
+
+/// What `camspring sweep` wrote.
+#[derive(Debug, Clone)]
+pub struct SweepRun {
+    /// The grid points and their results.
+    pub points: Vec<crate::sweep::SweepPoint>,
+    /// sweep.csv and sweep.svg.
+    pub written: Vec<PathBuf>,
+}
+
+/// Runs `camspring sweep`: the design at every point of the grid, in parallel; writes
+/// `sweep.csv` and `sweep.svg` into `out_dir` (default `out/<spec name>/sweep`).
+pub fn run_sweep(
+    spec_path: Option<&Path>,
+    axes: &[crate::sweep::Axis],
+    out_dir: Option<&Path>,
+) -> Result<SweepRun> {
+    use crate::sweep::{sweep, sweep_csv, sweep_svg};
+    use std::io::IsTerminal;
+    if axes.is_empty() || axes.len() > 3 {
+        return Err(Error::Argument(format!(
+            "sweep: {} --vary axes given; expected 1 to 3",
+            axes.len()
+        )));
+    }
+    let spec = load_spec(spec_path)?;
+    let total: usize = axes.iter().map(|a| a.values.len()).product();
+    let bar = (std::io::stderr().is_terminal() && std::env::var_os("CI").is_none() && total > 16)
+        .then(|| {
+            let bar = indicatif::ProgressBar::new(total as u64);
+            bar.set_style(
+                indicatif::ProgressStyle::with_template(
+                    "sweep {bar:40} {pos}/{len} designs ({eta})",
+                )
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+            );
+            bar
+        });
+    let points = sweep(&spec, axes, &|| {
+        if let Some(b) = &bar {
+            b.inc(1);
+        }
+    });
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    let dir = out_dir
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| Path::new("out").join(&spec.name).join("sweep"));
+    let csv = dir.join("sweep.csv");
+    let svg = dir.join("sweep.svg");
+    crate::export::write_atomic(&csv, &sweep_csv(axes, &points))?;
+    crate::export::write_atomic(&svg, sweep_svg(axes, &points).as_bytes())?;
+    Ok(SweepRun {
+        points,
+        written: vec![csv, svg],
+    })
+}

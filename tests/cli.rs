@@ -666,3 +666,34 @@ fn colour_only_on_a_terminal_and_never_with_no_color() {
     assert!(tty(false).contains("\x1b[32mPASS\x1b[0m"));
     assert!(!tty(true).contains('\x1b'));
 }
+
+#[test]
+fn sweep_writes_its_grid_and_refuses_bad_axes() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let out = camspring(
+        d,
+        &[
+            "sweep",
+            "--vary",
+            "spring_rate=2..20:4",
+            "--vary",
+            "roller_radius=2,3",
+            "-o",
+            "sw",
+        ],
+    );
+    assert_eq!(out.status.code(), Some(0));
+    assert!(String::from_utf8_lossy(&out.stdout).starts_with("8 designs:"));
+    let csv = std::fs::read_to_string(d.join("sw/sweep.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 9);
+    assert!(std::fs::read_to_string(d.join("sw/sweep.svg"))
+        .unwrap()
+        .contains("Largest pressure angle"));
+    let out = camspring(d, &["sweep", "--vary", "preload=0..2:3", "--json"]);
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v.as_array().unwrap().len(), 3);
+    let out = camspring(d, &["sweep", "--vary", "colour=1..2"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("unknown key"));
+}

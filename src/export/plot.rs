@@ -223,7 +223,8 @@ pub fn render_panel(panel: &Panel, x0: f64, y0: f64, w: f64, h: f64) -> Group {
                 .set("stroke", "#888"),
         );
     }
-    for (i, s) in panel.series.iter().enumerate() {
+    let mut legend_row = 0;
+    for s in panel.series.iter() {
         if s.dots {
             for &(x, y) in s
                 .points
@@ -259,7 +260,8 @@ pub fn render_panel(panel: &Panel, x0: f64, y0: f64, w: f64, h: f64) -> Group {
         if s.label.is_empty() {
             continue;
         }
-        let ly = y0 + top + 14.0 + 16.0 * i as f64;
+        let ly = y0 + top + 14.0 + 16.0 * legend_row as f64;
+        legend_row += 1;
         let mut key = Line::new()
             .set("x1", x0 + left + 10.0)
             .set("x2", x0 + left + 34.0)

@@ -1,0 +1,318 @@
+//! `camspring sweep`: a grid of follower designs around one spec, run in parallel (rayon), so a
+//! designer can pick a makeable combination of spring rate, preload, roller and friction.
+//!
+//! Each axis is `key=a..b` (10 values from a to b), `key=a..b:n` (n values) or `key=v1,v2,...`,
+//! in the spec's default units: `spring_rate` (N/mm), `preload` (mm), `roller_radius` (mm),
+//! `friction` (contact coefficient). Every grid point runs the full design (law, cam synthesis,
+//! the five checks); `sweep.csv` has one row per point and `sweep.svg` plots the largest
+//! pressure angle, the lift and the peak contact stress against the first axis, one line per
+//! value of the second.
+
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::cam::checks::Status;
+use crate::cam::follower::FrictionSource;
+use crate::export::plot::{self, Panel, Series};
+use crate::spec::Spec;
+
+/// A follower setting the sweep can vary.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SweepKey {
+    /// `follower.spring_rate` (N/mm).
+    SpringRate,
+    /// `follower.preload` (mm).
+    Preload,
+    /// `follower.roller_radius` (mm).
+    RollerRadius,
+    /// `follower.friction` (coefficient).
+    Friction,
+}
+
+impl SweepKey {
+    /// Name and unit as used in CSV headers.
+    pub fn column(self) -> &'static str {
+        match self {
+            SweepKey::SpringRate => "spring_rate_n_per_mm",
+            SweepKey::Preload => "preload_mm",
+            SweepKey::RollerRadius => "roller_radius_mm",
+            SweepKey::Friction => "friction",
+        }
+    }
+
+    /// Axis label with unit.
+    pub fn label(self) -> &'static str {
+        match self {
+            SweepKey::SpringRate => "spring rate ks (N/mm)",
+            SweepKey::Preload => "preload Yp (mm)",
+            SweepKey::RollerRadius => "roller radius r (mm)",
+            SweepKey::Friction => "friction coefficient",
+        }
+    }
+
+    fn check(self, v: f64) -> Result<(), String> {
+        let ok = match self {
+            SweepKey::SpringRate => v > 0.0,
+            SweepKey::Preload | SweepKey::RollerRadius => v >= 0.0,
+            SweepKey::Friction => (0.0..1.0).contains(&v),
+        };
+        if ok && v.is_finite() {
+            Ok(())
+        } else {
+            Err(format!(
+                "{} = {v} is outside its range ({})",
+                self.column(),
+                match self {
+                    SweepKey::SpringRate => "> 0",
+                    SweepKey::Preload | SweepKey::RollerRadius => ">= 0",
+                    SweepKey::Friction => "0 to below 1",
+                }
+            ))
+        }
+    }
+
+    fn apply(self, spec: &mut Spec, v: f64) {
+        let f = &mut spec.follower;
+        match self {
+            SweepKey::SpringRate => f.spring_rate_n_per_mm = v,
+            SweepKey::Preload => f.preload_mm = v,
+            SweepKey::RollerRadius => f.roller_radius_mm = v,
+            SweepKey::Friction => f.friction = FrictionSource::Coefficient { coefficient: v },
+        }
+    }
+}
+
+/// One axis of the grid.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Axis {
+    /// What varies.
+    pub key: SweepKey,
+    /// Its values.
+    pub values: Vec<f64>,
+}
+
+/// Parses `key=a..b`, `key=a..b:n` or `key=v1,v2,...`.
+pub fn parse_axis(text: &str) -> Result<Axis, String> {
+    let (name, spec) = text
+        .split_once('=')
+        .ok_or_else(|| format!("--vary {text}: expected KEY=A..B, KEY=A..B:N or KEY=V1,V2,..."))?;
+    let key = match name.trim() {
+        "spring_rate" => SweepKey::SpringRate,
+        "preload" => SweepKey::Preload,
+        "roller_radius" => SweepKey::RollerRadius,
+        "friction" => SweepKey::Friction,
+        other => {
+            return Err(format!(
+                "--vary {text}: unknown key \"{other}\" (keys: spring_rate, preload, roller_radius, friction)"
+            ))
+        }
+    };
+    let number = |s: &str| {
+        s.trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| format!("--vary {text}: \"{}\" is not a number", s.trim()))
+    };
+    let values = if let Some((range, count)) = spec.split_once("..").map(|(a, rest)| {
+        let (b, n) = rest.split_once(':').unwrap_or((rest, "10"));
+        ((a, b), n)
+    }) {
+        let (a, b) = (number(range.0)?, number(range.1)?);
+        let n: usize = count
+            .trim()
+            .parse()
+            .ok()
+            .filter(|n| (2..=200).contains(n))
+            .ok_or_else(|| format!("--vary {text}: the count \"{count}\" must be 2 to 200"))?;
+        (0..n)
+            .map(|i| a + (b - a) * i as f64 / (n - 1) as f64)
+            .collect()
+    } else {
+        spec.split(',').map(number).collect::<Result<Vec<_>, _>>()?
+    };
+    for &v in &values {
+        key.check(v).map_err(|e| format!("--vary {text}: {e}"))?;
+    }
+    Ok(Axis { key, values })
+}
+
+/// What one grid point gave.
+#[derive(Debug, Clone, Serialize)]
+pub struct PointResult {
+    /// Overall status of the checks.
+    pub status: Status,
+    /// Follower lift at Xmax (mm).
+    pub lift_mm: f64,
+    /// Largest pressure angle (deg).
+    pub max_pressure_angle_deg: f64,
+    /// Peak Hertz contact stress (MPa).
+    pub max_contact_stress_mpa: Option<f64>,
+    /// Names of the failing checks.
+    pub failed_checks: Vec<&'static str>,
+}
+
+/// One grid point: its axis values and the design's result or why there is none.
+#[derive(Debug, Clone, Serialize)]
+pub struct SweepPoint {
+    /// Axis values, in axis order.
+    pub values: Vec<f64>,
+    /// The result, or the error that stopped the design.
+    pub result: Result<PointResult, String>,
+}
+
+/// Runs the design at every point of the grid (all combinations of the axes), in parallel.
+/// `progress` is called from the workers after each point.
+pub fn sweep(spec: &Spec, axes: &[Axis], progress: &(dyn Fn() + Sync)) -> Vec<SweepPoint> {
+    let mut grid: Vec<Vec<f64>> = vec![Vec::new()];
+    for axis in axes {
+        grid = grid
+            .into_iter()
+            .flat_map(|p| {
+                axis.values.iter().map(move |&v| {
+                    let mut q = p.clone();
+                    q.push(v);
+                    q
+                })
+            })
+            .collect();
+    }
+    grid.into_par_iter()
+        .map(|values| {
+            let mut s = spec.clone();
+            for (axis, &v) in axes.iter().zip(&values) {
+                axis.key.apply(&mut s, v);
+            }
+            let result = crate::design::design(&s)
+                .map(|d| {
+                    let summary = crate::export::summarize(&d, &[]);
+                    PointResult {
+                        status: summary.status,
+                        lift_mm: summary.profile.lift_mm,
+                        max_pressure_angle_deg: summary.profile.max_pressure_angle_deg,
+                        max_contact_stress_mpa: summary.profile.max_contact_stress_mpa,
+                        failed_checks: summary
+                            .checks
+                            .iter()
+                            .filter(|c| c.status == Status::Fail)
+                            .map(|c| c.name)
+                            .collect(),
+                    }
+                })
+                .map_err(|e| e.to_string());
+            progress();
+            SweepPoint { values, result }
+        })
+        .collect()
+}
+
+/// `sweep.csv`: the axis values, then status, lift_mm, max_pressure_angle_deg,
+/// max_contact_stress_mpa, failed_checks (space-separated) and error.
+pub fn sweep_csv(axes: &[Axis], points: &[SweepPoint]) -> Vec<u8> {
+    use std::fmt::Write as _;
+    let mut out = String::new();
+    for a in axes {
+        let _ = write!(out, "{},", a.key.column());
+    }
+    out.push_str(
+        "status,lift_mm,max_pressure_angle_deg,max_contact_stress_mpa,failed_checks,error\n",
+    );
+    for p in points {
+        for v in &p.values {
+            let _ = write!(out, "{v},");
+        }
+        match &p.result {
+            Ok(r) => {
+                let _ = writeln!(
+                    out,
+                    "{},{:.6},{:.4},{},{},",
+                    r.status.as_str(),
+                    r.lift_mm,
+                    r.max_pressure_angle_deg,
+                    r.max_contact_stress_mpa
+                        .map_or(String::new(), |v| format!("{v:.3}")),
+                    r.failed_checks.join(" ")
+                );
+            }
+            Err(e) => {
+                let _ = writeln!(out, "error,,,,,\"{}\"", e.replace('"', "'"));
+            }
+        }
+    }
+    out.into_bytes()
+}
+
+/// `sweep.svg`: largest pressure angle, lift and contact stress against the first axis, one
+/// line per value of the second axis (points of failing designs are left out of the lines
+/// and drawn as dots).
+pub fn sweep_svg(axes: &[Axis], points: &[SweepPoint]) -> String {
+    let colours = [
+        "#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#7f7f7f",
+        "#bcbd22", "#17becf",
+    ];
+    let groups: Vec<Option<f64>> = match axes.get(1) {
+        Some(a) => a.values.iter().map(|&v| Some(v)).collect(),
+        None => vec![None],
+    };
+    let panel = |title: &str, label: &str, get: &dyn Fn(&PointResult) -> Option<f64>| {
+        let mut series = Vec::new();
+        for (i, g) in groups.iter().enumerate() {
+            let in_group = |p: &&SweepPoint| g.is_none_or(|v| p.values.get(1) == Some(&v));
+            let ok: Vec<(f64, f64)> = points
+                .iter()
+                .filter(in_group)
+                .filter_map(|p| match &p.result {
+                    Ok(r) if r.status != Status::Fail => get(r).map(|y| (p.values[0], y)),
+                    _ => None,
+                })
+                .collect();
+            let failing: Vec<(f64, f64)> = points
+                .iter()
+                .filter(in_group)
+                .filter_map(|p| match &p.result {
+                    Ok(r) if r.status == Status::Fail => get(r).map(|y| (p.values[0], y)),
+                    _ => None,
+                })
+                .collect();
+            let colour = colours[i % colours.len()];
+            let name = match (g, axes.get(1)) {
+                (Some(v), Some(a)) => format!("{} = {v:.4}", a.key.column()),
+                _ => "makeable designs".into(),
+            };
+            series.push(Series {
+                label: name,
+                points: ok,
+                color: colour,
+                dashed: false,
+                dots: false,
+            });
+            if !failing.is_empty() {
+                series.push(Series {
+                    label: String::new(),
+                    points: failing,
+                    color: colour,
+                    dashed: false,
+                    dots: true,
+                });
+            }
+        }
+        Panel {
+            title: format!("{title} (dots: a check fails)"),
+            x_label: axes[0].key.label().into(),
+            y_label: label.into(),
+            series,
+            ..Default::default()
+        }
+    };
+    let panels = [
+        panel("Largest pressure angle", "pressure angle (deg)", &|r| {
+            Some(r.max_pressure_angle_deg)
+        }),
+        panel("Follower lift at Xmax", "lift (mm)", &|r| Some(r.lift_mm)),
+        panel("Peak contact stress", "contact stress (MPa)", &|r| {
+            r.max_contact_stress_mpa
+        }),
+    ];
+    plot::document(&panels, 520.0, 440.0).to_string()
+}
