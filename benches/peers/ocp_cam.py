@@ -10,7 +10,7 @@ a `camspring design` at 0.1 um chords.
 Usage (from the repository root, after `scripts/test` made .venv):
     .venv/bin/python -m pip install scipy
     cargo build --release
-    .venv/bin/python benches/peers/ocp_cam.py [N ...]     (default N = 21 50 200)
+    .venv/bin/python benches/peers/ocp_cam.py [N ...]     (default N = 6 11 21 50 200)
 """
 import json
 import math
@@ -162,7 +162,7 @@ def camspring_step_deviation(out, ref_summary):
 
 
 def main():
-    ns = [int(a) for a in sys.argv[1:]] or [21, 50, 200]
+    ns = [int(a) for a in sys.argv[1:]] or [6, 11, 21, 50, 200]
     out = pathlib.Path(tempfile.mkdtemp())
     t_cs = camspring_design(out)
     summary = json.loads((out / "ref" / "design.json").read_text())
