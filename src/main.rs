@@ -41,7 +41,20 @@ use camspring::run::{
 use camspring::spec::STARTER_SPEC_TOML;
 
 #[derive(Parser, Debug)]
-#[command(name = "camspring", version, about = "Design exponential cam springs and check them", long_about = None)]
+#[command(
+    name = "camspring",
+    version,
+    about = "Design exponential cam springs and check them",
+    long_about = None,
+    after_help = "Examples:
+  camspring design                                  # the built-in default spec into out/paper/
+  camspring init my.toml && camspring design my.toml
+  camspring sweep my.toml --vary spring_rate=2..20 --vary preload=0..10
+  camspring simulate -o calib.csv && camspring validate specs/paper.toml calib.csv
+
+Exit codes: 0 done, 1 a check or the validation failed, 2 bad input, 3 an output could not be written.
+More: README.md, docs/SPEC.md, docs/CALIBRATION.md, docs/JSON.md, `camspring <command> --help`."
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,

@@ -697,3 +697,31 @@ fn sweep_writes_its_grid_and_refuses_bad_axes() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("unknown key"));
 }
+
+#[test]
+fn help_has_examples_for_every_command() {
+    let dir = tempfile::tempdir().unwrap();
+    let top = camspring(dir.path(), &["--help"]);
+    assert_eq!(top.status.code(), Some(0));
+    assert!(String::from_utf8_lossy(&top.stdout).contains("Examples:"));
+    for sub in [
+        "design",
+        "simulate",
+        "noise",
+        "identify",
+        "estimate",
+        "validate",
+        "sweep",
+        "init",
+        "completions",
+        "man",
+    ] {
+        let out = camspring(dir.path(), &[sub, "--help"]);
+        assert_eq!(out.status.code(), Some(0), "{sub}");
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            text.contains("Examples:") && text.contains(&format!("camspring {sub}")),
+            "{sub}: {text}"
+        );
+    }
+}
