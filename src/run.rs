@@ -240,6 +240,22 @@ pub fn run_simulate(spec_path: Option<&Path>, opts: &SimulateOptions) -> Result<
     })
 }
 
+/// A progress bar on stderr for `len` units, only on a terminal, never when `CI` is set, and
+/// only for work of more than `threshold` units.
+fn progress_bar(len: u64, threshold: u64, template: &str) -> Option<indicatif::ProgressBar> {
+    use std::io::IsTerminal;
+    let show =
+        std::io::stderr().is_terminal() && std::env::var_os("CI").is_none() && len > threshold;
+    show.then(|| {
+        let bar = indicatif::ProgressBar::new(len);
+        bar.set_style(
+            indicatif::ProgressStyle::with_template(template)
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        bar
+    })
+}
+
 /// Reads a calibration log file, with a progress bar on stderr when `progress` is set and
 /// stderr is a terminal (never on a pipe or when `CI` is set).
 pub fn read_log_file(
@@ -248,27 +264,23 @@ pub fn read_log_file(
     sampling_tolerance: f64,
     progress: bool,
 ) -> Result<crate::estimate::log::CalibrationLog> {
-    use std::io::IsTerminal;
     let file = std::fs::File::open(path).map_err(|source| Error::Read {
         path: path.to_path_buf(),
         source,
     })?;
     let size = file.metadata().map(|m| m.len()).unwrap_or(0);
-    let show = progress
-        && std::io::stderr().is_terminal()
-        && std::env::var_os("CI").is_none()
-        && size > 8 << 20;
-    let bar = show.then(|| {
-        let bar = indicatif::ProgressBar::new(size);
-        bar.set_style(
-            indicatif::ProgressStyle::with_template(
+    let bar = progress
+        .then(|| {
+            progress_bar(
+                size,
+                8 << 20,
                 "reading {msg} {bar:40} {bytes}/{total_bytes} ({bytes_per_sec})",
             )
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-        );
-        bar.set_message(path.display().to_string());
-        bar
-    });
+        })
+        .flatten();
+    if let Some(b) = &bar {
+        b.set_message(path.display().to_string());
+    }
     let result = crate::estimate::log::read_log(
         std::io::BufReader::with_capacity(1 << 20, file),
         map,
@@ -497,19 +509,15 @@ pub fn estimate_log(
     if let Some(r) = opts.r_position_mm2 {
         settings.r_position_mm2 = r.max(1e-12);
     }
-    use std::io::IsTerminal;
-    let show = progress
-        && std::io::stderr().is_terminal()
-        && std::env::var_os("CI").is_none()
-        && log.len() > 200_000;
-    let bar = show.then(|| {
-        let bar = indicatif::ProgressBar::new(log.len() as u64);
-        bar.set_style(
-            indicatif::ProgressStyle::with_template("EKF {bar:40} {pos}/{len} samples ({per_sec})")
-                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-        );
-        bar
-    });
+    let bar = progress
+        .then(|| {
+            progress_bar(
+                log.len() as u64,
+                200_000,
+                "EKF {bar:40} {pos}/{len} samples ({per_sec})",
+            )
+        })
+        .flatten();
     let run = ekf::run(
         &log.t_s,
         &force,
@@ -618,7 +626,6 @@ pub fn run_sweep(
     out_dir: Option<&Path>,
 ) -> Result<SweepRun> {
     use crate::sweep::{sweep, sweep_csv, sweep_svg};
-    use std::io::IsTerminal;
     if axes.is_empty() || axes.len() > 3 {
         return Err(Error::Argument(format!(
             "sweep: {} --vary axes given; expected 1 to 3",
@@ -627,17 +634,11 @@ pub fn run_sweep(
     }
     let spec = load_spec(spec_path)?;
     let total: usize = axes.iter().map(|a| a.values.len()).product();
-    let bar = (std::io::stderr().is_terminal() && std::env::var_os("CI").is_none() && total > 16)
-        .then(|| {
-            let bar = indicatif::ProgressBar::new(total as u64);
-            bar.set_style(
-                indicatif::ProgressStyle::with_template(
-                    "sweep {bar:40} {pos}/{len} designs ({eta})",
-                )
-                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-            );
-            bar
-        });
+    let bar = progress_bar(
+        total as u64,
+        16,
+        "sweep {bar:40} {pos}/{len} designs ({eta})",
+    );
     let points = sweep(&spec, axes, &|| {
         if let Some(b) = &bar {
             b.inc(1);

@@ -14,50 +14,51 @@ pub mod sg;
 pub mod sim;
 pub mod validate;
 
-/// Parses a duration such as "300s", "300 s", "5min", "1h", "250ms" or a plain number of seconds.
-pub fn parse_duration_s(text: &str) -> Result<f64, String> {
+/// Parses a positive number with an optional unit suffix from `units` (name, factor), the
+/// empty unit meaning `units[0]`'s factor of 1. `example` goes into the error message.
+fn parse_scaled(text: &str, units: &[(&str, f64)], example: &str) -> Result<f64, String> {
     let t = text.trim();
     let split = t.find(|c: char| c.is_ascii_alphabetic()).unwrap_or(t.len());
     let (num, unit) = (t[..split].trim(), t[split..].trim());
-    let factor = match unit {
-        "" | "s" => 1.0,
-        "ms" => 1e-3,
-        "min" => 60.0,
-        "h" => 3600.0,
-        _ => {
-            return Err(format!(
-                "\"{text}\": unknown time unit \"{unit}\" (units: ms, s, min, h)"
-            ))
-        }
+    let factor = if unit.is_empty() {
+        1.0
+    } else {
+        units
+            .iter()
+            .find(|(name, _)| *name == unit)
+            .map(|(_, f)| *f)
+            .ok_or_else(|| {
+                let names: Vec<&str> = units.iter().map(|(n, _)| *n).collect();
+                format!(
+                    "\"{text}\": unknown unit \"{unit}\" (units: {})",
+                    names.join(", ")
+                )
+            })?
     };
     match num.parse::<f64>() {
         Ok(v) if v.is_finite() && v > 0.0 => Ok(v * factor),
         _ => Err(format!(
-            "\"{text}\": expected a positive duration such as \"300s\""
+            "\"{text}\": expected a positive value such as \"{example}\""
         )),
     }
 }
 
+/// Parses a duration such as "300s", "300 s", "5min", "1h", "250ms" or a plain number of seconds.
+pub fn parse_duration_s(text: &str) -> Result<f64, String> {
+    parse_scaled(
+        text,
+        &[("s", 1.0), ("ms", 1e-3), ("min", 60.0), ("h", 3600.0)],
+        "300s",
+    )
+}
+
 /// Parses a rate such as "100Hz", "1 kHz" or a plain number of hertz.
 pub fn parse_rate_hz(text: &str) -> Result<f64, String> {
-    let t = text.trim();
-    let split = t.find(|c: char| c.is_ascii_alphabetic()).unwrap_or(t.len());
-    let (num, unit) = (t[..split].trim(), t[split..].trim());
-    let factor = match unit {
-        "" | "Hz" | "hz" => 1.0,
-        "kHz" | "khz" => 1e3,
-        _ => {
-            return Err(format!(
-                "\"{text}\": unknown rate unit \"{unit}\" (units: Hz, kHz)"
-            ))
-        }
-    };
-    match num.parse::<f64>() {
-        Ok(v) if v.is_finite() && v > 0.0 => Ok(v * factor),
-        _ => Err(format!(
-            "\"{text}\": expected a positive rate such as \"100Hz\""
-        )),
-    }
+    parse_scaled(
+        text,
+        &[("Hz", 1.0), ("hz", 1.0), ("kHz", 1e3), ("khz", 1e3)],
+        "100Hz",
+    )
 }
 
 /// Parses a relative tolerance such as "10%" or "0.1".
