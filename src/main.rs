@@ -360,11 +360,8 @@ struct FilterArgs {
 }
 
 impl FilterArgs {
-    fn parse(
-        &self,
-        noise: SensorNoise,
-        window_s: Option<f64>,
-    ) -> Result<EstimateOptions, camspring::Error> {
+    fn parse(&self, sensors: &Sensors) -> Result<EstimateOptions, camspring::Error> {
+        let (noise, window_s) = sensors.parse()?;
         let arg = camspring::Error::Argument;
         let discretization = match self.discretization.as_str() {
             "rk4" => Discretization::Rk4,
@@ -762,8 +759,7 @@ fn main() -> ExitCode {
         } => {
             let run = (|| {
                 let (map, tol) = columns.parse()?;
-                let (sensor, window_s) = sensors.parse()?;
-                let opts = filter.parse(sensor, window_s)?;
+                let opts = filter.parse(&sensors)?;
                 run_estimate(&log, &map, tol, &opts, out.as_deref())
             })();
             match run {
@@ -788,8 +784,7 @@ fn main() -> ExitCode {
         } => {
             let run = (|| {
                 let (map, tol) = columns.parse()?;
-                let (sensor, window_s) = sensors.parse()?;
-                let opts = filter.parse(sensor, window_s)?;
+                let opts = filter.parse(&sensors)?;
                 if !matches!(opts.init, EstimateInit::Identify) {
                     return Err(camspring::Error::Argument(
                         "validate: --init must be identify (the design is what is checked)".into(),

@@ -493,7 +493,7 @@ pub fn estimate_log(
             *f -= init.d0_n * sign;
         }
     }
-    let (_, first) = ekf::force_rate(&force, dt, opts.force_rate);
+    let first = ekf::force_rate_first_sample(dt, opts.force_rate);
     let x0 = log.position_mm.get(first).copied().unwrap_or(0.0);
     let (z0, sigma_std) = ekf::initial_state(&init, x0, stroke);
     settings.p0_std[ekf::idx::SIGMA] = sigma_std;

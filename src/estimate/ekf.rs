@@ -368,6 +368,15 @@ pub enum ForceRate {
     ZeroPhase,
 }
 
+/// The first log sample that has a force rate (zero-phase drops half a window at the start),
+/// without computing the rate.
+pub fn force_rate_first_sample(dt: f64, how: ForceRate) -> usize {
+    match how {
+        ForceRate::ZeroPhase => super::sg::Differentiator::for_rate(1.0 / dt).half,
+        ForceRate::FirstOrder { .. } => 0,
+    }
+}
+
 /// The force rate of a force signal sampled every `dt`, aligned with the samples
 /// `first .. first + len` of the log (zero-phase drops half a window at each end).
 pub fn force_rate(force_n: &[f64], dt: f64, how: ForceRate) -> (Vec<f64>, usize) {
@@ -411,8 +420,6 @@ pub struct EkfRun {
     pub offsets: Vec<[f64; 2]>,
     /// Their standard deviations.
     pub offset_stds: Vec<[f64; 2]>,
-    /// The input used (N/s).
-    pub force_rate_n_per_s: Vec<f64>,
     /// Final filter (state and covariance).
     pub last: Ekf,
     /// Final offset filter.
@@ -464,7 +471,6 @@ pub fn run(
         stds: Vec::with_capacity(len),
         offsets: Vec::with_capacity(len),
         offset_stds: Vec::with_capacity(len),
-        force_rate_n_per_s: rate.clone(),
         last: ekf.clone(),
         offset_filter: offsets,
         outliers: 0,

@@ -52,8 +52,8 @@ impl Default for ColumnMap {
     }
 }
 
-/// Parses a `name` or `name:unit` column option for a dimension.
-pub fn parse_column(text: &str, dim: Dimension, what: &str) -> Result<Column, LogError> {
+/// Splits a `name` or `name:unit` column option; the name must not be empty.
+fn split_column<'a>(text: &'a str, what: &str) -> Result<(&'a str, Option<&'a str>), LogError> {
     let (name, unit) = match text.split_once(':') {
         Some((n, u)) => (n.trim(), Some(u.trim())),
         None => (text.trim(), None),
@@ -63,16 +63,18 @@ pub fn parse_column(text: &str, dim: Dimension, what: &str) -> Result<Column, Lo
             "--{what}: empty column name in \"{text}\""
         )));
     }
+    Ok((name, unit))
+}
+
+/// Parses a `name` or `name:unit` column option for a dimension.
+pub fn parse_column(text: &str, dim: Dimension, what: &str) -> Result<Column, LogError> {
+    let (name, unit) = split_column(text, what)?;
     let factor = match unit {
         None => 1.0,
         Some(u) => parse_quantity(&format!("1 {u}"), dim).map_err(|_| {
             LogError::Option(format!(
                 "--{what} {text}: unknown unit \"{u}\" (units: {})",
-                if dim == Dimension::Dimensionless {
-                    "s, ms".into()
-                } else {
-                    dim.unit_list()
-                }
+                dim.unit_list()
             ))
         })?,
     };
@@ -82,12 +84,9 @@ pub fn parse_column(text: &str, dim: Dimension, what: &str) -> Result<Column, Lo
     })
 }
 
-/// Parses a time column option (units s or ms).
+/// Parses a time column option (units s, ms or us).
 pub fn parse_time_column(text: &str) -> Result<Column, LogError> {
-    let (name, unit) = match text.split_once(':') {
-        Some((n, u)) => (n.trim(), Some(u.trim())),
-        None => (text.trim(), None),
-    };
+    let (name, unit) = split_column(text, "time")?;
     let factor = match unit {
         None | Some("s") => 1.0,
         Some("ms") => 1e-3,

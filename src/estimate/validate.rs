@@ -21,6 +21,12 @@ use super::identify::Identification;
 use crate::export::plot::{self, Panel, Series};
 use crate::law::ExpLaw;
 
+/// The spring force the EKF's state implies: sigma / k2 + F0 (the affine relation), with F0
+/// from the parallel filter's `offsets`.
+fn spring_force_n(z: &super::ekf::State, offsets: &[f64; 2]) -> f64 {
+    z[idx::SIGMA] / z[idx::K2] + offsets[0]
+}
+
 /// One criterion of the verdict.
 #[derive(Debug, Clone, Serialize)]
 pub struct Criterion {
@@ -93,7 +99,7 @@ pub fn validate(
     let n = run.states.len();
     let (mut num, mut den) = (0.0, 0.0);
     for (z, off) in run.states[n / 2..].iter().zip(&run.offsets[n / 2..]) {
-        let force = z[idx::SIGMA] / z[idx::K2] + off[0];
+        let force = spring_force_n(z, off);
         let line = designed.k2_per_mm * (force - designed.f0_n);
         num += (z[idx::SIGMA] - line).powi(2);
         den += line * line;
@@ -186,7 +192,7 @@ pub fn validation_svg(v: &Validation, run: &EkfRun) -> String {
         .iter()
         .zip(&run.offsets[n / 2..])
         .step_by(stride)
-        .map(|(z, off)| (z[idx::SIGMA] / z[idx::K2] + off[0], z[idx::SIGMA]))
+        .map(|(z, off)| (spring_force_n(z, off), z[idx::SIGMA]))
         .collect();
     let fmax = scatter.iter().fold(0.0_f64, |m, p| m.max(p.0));
     let fmin = scatter.iter().fold(f64::INFINITY, |m, p| m.min(p.0));
