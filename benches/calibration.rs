@@ -7,9 +7,9 @@ use std::hint::black_box;
 use camspring::design::law_of;
 use camspring::estimate::identify::{identify, SensorNoise};
 use camspring::estimate::log::{read_log, write_log, ColumnMap};
-use camspring::estimate::report::noise_model;
+use camspring::estimate::noise::noise_model;
 use camspring::estimate::sim::{simulate, Dynamics, Noise, Profile, SimSettings};
-use camspring::spec::{Spec, DEFAULT_SPEC_TOML};
+use camspring::{spec::DEFAULT_SPEC_TOML, Spec};
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 
 fn hour_log(profile: Profile) -> camspring::estimate::log::CalibrationLog {

@@ -5,10 +5,16 @@ use std::hint::black_box;
 
 use camspring::cam::pitch_curve::synthesize;
 use camspring::design::{design, law_of, synthesis_options};
-use camspring::export::{drawing, dxf, force_svg, profile_csv, profile_svg, step, stl, summarize};
+use camspring::export::{drawing, dxf, step, stl};
 use camspring::law::solve;
+use camspring::outputs::summarize;
 use camspring::part::build;
-use camspring::spec::{LawSpec, Spec, DEFAULT_SPEC_TOML};
+use camspring::part::mesh;
+use camspring::render::design::{force_svg, profile_csv, profile_svg};
+use camspring::{
+    model::{LawSpec, Spec},
+    spec::DEFAULT_SPEC_TOML,
+};
 use criterion::{criterion_group, criterion_main, Criterion};
 
 fn benches(c: &mut Criterion) {
@@ -46,8 +52,8 @@ fn benches(c: &mut Criterion) {
     });
     c.bench_function("stl_export (5 um, mesh + bytes)", |b| {
         b.iter(|| {
-            let rings = stl::rings(black_box(&part), 5e-3, 1e-3);
-            stl::stl_bytes(&stl::mesh(&rings, part.thickness_mm).unwrap())
+            let rings = mesh::rings(black_box(&part), 5e-3, 1e-3);
+            stl::stl_bytes(&mesh::mesh(&rings, part.thickness_mm).unwrap())
         })
     });
     c.bench_function("dxf_and_drawing_export", |b| {

@@ -1,20 +1,14 @@
-//! Design a spring in code: solve a law from targets, synthesise the cam for two opposed
-//! followers, print the profile numbers and the checks, and write the outputs.
+//! Design a spring in code: state a law by its targets, build the spec with the builder (two
+//! opposed followers on one shared spring), design it, print the profile numbers and the
+//! checks, and write the outputs.
 //!
 //! Run: `cargo run --example design_in_code`
 
-use camspring::cam::follower::{Follower, FrictionCorrection, FrictionSource, SpringArrangement};
-use camspring::design::design;
-use camspring::export::write_design;
-use camspring::law::LawTargets;
-use camspring::spec::{LawSpec, Spec, DEFAULT_SPEC_TOML};
+use camspring::model::{FrictionCorrection, FrictionSource, SpringArrangement};
+use camspring::{design, plan, write_design, Follower, LawSpec, LawTargets, Spec};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    // Start from the default spec for the part, material and check settings...
-    let mut spec = Spec::from_toml(DEFAULT_SPEC_TOML)?;
-    spec.name = "from-code".into();
-    // ...and set a stiffer law and a different follower arrangement in code.
-    spec.law = LawSpec::Targets(LawTargets {
+    let law = LawSpec::Targets(LawTargets {
         fmax_n: 300.0,
         fmin_n: 8.0,
         xmax_mm: 15.0,
@@ -22,15 +16,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         c0: 0.15,
         delta0_mm: 0.5,
     });
-    spec.follower = Follower {
-        count: 2,
-        arrangement: SpringArrangement::Shared,
-        spring_rate_n_per_mm: 4.0,
-        preload_mm: 2.0,
-        roller_radius_mm: 4.0,
-        friction: FrictionSource::Coefficient { coefficient: 0.02 },
-        friction_correction: FrictionCorrection::Midline,
-    };
+    let follower = Follower::new(4.0, 4.0)
+        .with_count(2)
+        .with_arrangement(SpringArrangement::Shared)
+        .with_preload(2.0)
+        .with_friction(FrictionSource::Coefficient { coefficient: 0.02 })
+        .with_friction_correction(FrictionCorrection::Midline);
+    // Every rule a TOML spec obeys is checked here too, naming the key.
+    let spec = Spec::builder(law, follower).name("from-code").build()?;
     let d = design(&spec)?;
     println!(
         "F = {:.4} N * exp({:.5} /mm * x) + {:.4} N",
@@ -49,9 +42,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             c.advice.as_deref().unwrap_or("")
         );
     }
+    let outputs = plan(&d)?;
     let dir = std::env::temp_dir().join("camspring-example");
-    let (_, written) = write_design(&d, &dir)?;
-    for p in written {
+    for p in write_design(&d, &outputs, &dir)? {
         println!("wrote {}", p.display());
     }
     Ok(())

@@ -4,12 +4,10 @@
 //!
 //! Run: `cargo run --release --example ekf_on_log [calib.csv]`
 
-use camspring::estimate::ekf::{idx, Discretization, ForceRate};
-use camspring::estimate::identify::SensorNoise;
-use camspring::estimate::log::ColumnMap;
+use camspring::app::read_log_file;
+use camspring::estimate::ekf::idx;
 use camspring::estimate::sim::{simulate, Dynamics, Noise, Profile, SimSettings};
-use camspring::run::{estimate_log, read_log_file, EstimateInit, EstimateOptions};
-use camspring::spec::{Spec, DEFAULT_SPEC_TOML};
+use camspring::{estimate, spec::DEFAULT_SPEC_TOML, ColumnMap, EstimateOptions, SensorNoise, Spec};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let log = match std::env::args().nth(1) {
@@ -28,18 +26,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             simulate(&law, 20.0, law.force_n(20.0), &settings)?.0
         }
     };
-    let options = EstimateOptions {
-        init: EstimateInit::Identify,
-        discretization: Discretization::Rk4,
-        force_rate: ForceRate::ZeroPhase,
-        noise: SensorNoise::default(),
-        window_s: None,
-        outlier_sigmas: None,
-        q: Vec::new(),
-        p0_std: Vec::new(),
-        r_position_mm2: None,
-    };
-    let est = estimate_log(&log, &options, false)?;
+    let options = EstimateOptions::new(SensorNoise::default());
+    let est = estimate(&log, &options, |_, _| {})?;
     let z = est.run.last.z;
     let sd = est.run.last.std();
     println!("{} samples filtered", est.run.states.len());

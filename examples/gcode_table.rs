@@ -10,9 +10,9 @@
 
 use camspring::design::design;
 use camspring::part::build;
-use camspring::spec::{Spec, DEFAULT_SPEC_TOML};
 use camspring::toolpath::path::sample_move;
 use camspring::toolpath::{gcode, passes};
+use camspring::{spec::DEFAULT_SPEC_TOML, Spec};
 
 fn main() {
     let mut reference = Spec::from_toml(DEFAULT_SPEC_TOML).unwrap();

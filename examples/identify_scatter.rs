@@ -5,9 +5,9 @@
 //! Run: `cargo run --release --example identify_scatter [seeds] [seconds] [m d1 d2]`
 //! (default 20, 300 and `Dynamics::light()`).
 
-use camspring::estimate::identify::{identify, SensorNoise, PARAMS};
+use camspring::estimate::identify::{identify, Param, SensorNoise, PARAMS};
 use camspring::estimate::sim::{simulate, Dynamics, Noise, Profile, SimSettings};
-use camspring::spec::{Spec, DEFAULT_SPEC_TOML};
+use camspring::{spec::DEFAULT_SPEC_TOML, Spec};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
@@ -60,20 +60,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             };
             let (log, _) = simulate(&law, xmax, law.force_n(xmax), &settings)?;
             let id = identify(&log, &SensorNoise::default())?;
-            for (k, name) in PARAMS.iter().enumerate() {
-                match id.get(name).and_then(|e| e.value.zip(e.std)) {
+            for (p, e) in id.parameters.iter() {
+                let k = p.index();
+                match e.value.zip(e.std) {
                     Some((v, s)) => z[k].push((v - truth[k]) / s),
                     None => missing[k] += 1,
                 }
             }
-            let rel = |k: usize| {
-                id.parameters[k]
-                    .1
-                    .value
-                    .map_or(f64::NAN, |v| v / truth[k] - 1.0)
+            let rel = |p: Param| {
+                id.parameters
+                    .value(p)
+                    .map_or(f64::NAN, |v| v / truth[p.index()] - 1.0)
             };
-            worst_k2 = worst_k2.max(rel(6).abs());
-            worst_mu = worst_mu.max(rel(4).abs());
+            worst_k2 = worst_k2.max(rel(Param::K2).abs());
+            worst_mu = worst_mu.max(rel(Param::Mu).abs());
         }
         for (k, zk) in z.iter().enumerate() {
             let n = zk.len() as f64;

@@ -1,4 +1,4 @@
-//! The design pipeline: a validated [`Spec`] in, a complete [`Design`] out.
+//! The design pipeline: a [`Spec`] in, validated, and a complete [`Design`] out.
 //!
 //! Spec -> law (solved or given) -> pitch curve (virtual work with preload and friction
 //! correction) -> cam surface (roller offset) -> predicted forces -> checks. Pure computation:
@@ -9,7 +9,7 @@ use crate::cam::forces::{contact_modulus_mpa, predict, ContactModel, RodForce};
 use crate::cam::pitch_curve::{synthesize, CamError, PitchCurve, SynthesisOptions};
 use crate::cam::surface::{offset, CamSurface};
 use crate::law::{check_law, solve, LawError, SolvedLaw};
-use crate::spec::{LawSpec, Spec};
+use crate::model::{LawSpec, Spec, SpecError};
 
 /// Number of arc-length steps the stroke is at least divided into (for smooth plots).
 pub const MIN_SAMPLES_PER_STROKE: f64 = 250.0;
@@ -17,6 +17,9 @@ pub const MIN_SAMPLES_PER_STROKE: f64 = 250.0;
 /// Why a spec could not be turned into a design.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum DesignError {
+    /// Produced by [`design`] when the spec breaks a rule of [`Spec::validate`].
+    #[error("spec: {0}")]
+    Spec(#[from] SpecError),
     /// Produced by [`design`] when the law cannot be solved or realised.
     #[error("force law: {0}")]
     Law(#[from] LawError),
@@ -56,6 +59,14 @@ impl Design {
     pub fn xmax_mm(&self) -> f64 {
         self.spec.law.xmax_mm()
     }
+
+    /// The peak Hertz contact pressure over the stroke (None where a sample has none).
+    pub fn max_contact_stress_mpa(&self) -> Option<f64> {
+        self.forces
+            .iter()
+            .map(|f| f.contact_stress_mpa)
+            .try_fold(0.0_f64, |m, p| p.map(|p| m.max(p)))
+    }
 }
 
 /// The sampling options a spec asks for.
@@ -84,12 +95,13 @@ pub fn law_of(spec: &Spec) -> Result<SolvedLaw, LawError> {
 /// Runs the whole design.
 ///
 /// ```
-/// use camspring::{design::design, spec::{Spec, DEFAULT_SPEC_TOML}};
+/// use camspring::{design, spec::DEFAULT_SPEC_TOML, Spec};
 /// let d = design(&Spec::from_toml(DEFAULT_SPEC_TOML).unwrap()).unwrap();
 /// assert!((d.law.alpha.unwrap() - 1.3201914760).abs() < 1e-9);
 /// assert!(d.pitch_curve.lift_mm() > 0.0);
 /// ```
 pub fn design(spec: &Spec) -> Result<Design, DesignError> {
+    spec.validate()?;
     let law = law_of(spec)?;
     let options = synthesis_options(spec);
     let follower = &spec.follower;
@@ -102,7 +114,7 @@ pub fn design(spec: &Spec) -> Result<Design, DesignError> {
     );
     let contact = ContactModel {
         e_star_mpa: contact_modulus_mpa(&spec.part.cam_material, &spec.part.roller_material),
-        length_mm: spec.part.thickness_mm.min(spec.part.roller_width_mm),
+        length_mm: spec.part.contact_length_mm(),
     };
     let forces = predict(&law.law, follower, &pitch_curve, &cam_surface, &contact);
     let checks = run_checks(&CheckInput {

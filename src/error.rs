@@ -1,16 +1,17 @@
-//! The crate's top-level error: everything a command can fail with, sorted by exit code.
+//! The commands' error: everything a command can fail with, sorted by exit code. Each layer
+//! below has its own error type; this one wraps them for the application layer.
 
 use std::path::PathBuf;
 
 use crate::design::DesignError;
-use crate::part::PartError;
-use crate::spec::SpecError;
-use crate::toolpath::ToolpathError;
+use crate::export::ExportError;
+use crate::model::SpecError;
+use crate::outputs::PlanError;
 
 /// Any failure of a camspring command.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
-    /// Produced by [`crate::run::load_spec`] when the spec is invalid.
+    /// Produced by [`crate::app::load_spec`] when the spec is invalid.
     #[error("spec {path}: {source}")]
     Spec {
         /// The spec file (or "built-in default").
@@ -22,15 +23,11 @@ pub enum Error {
     /// Produced by [`crate::design::design`] (through the commands) when the spec cannot be realised.
     #[error(transparent)]
     Design(#[from] DesignError),
-    /// Produced by [`crate::export::write_design`] when the part cannot be built (a hole
-    /// that does not fit, or a fit that cannot reach its tolerance).
-    #[error("part: {0}")]
-    Part(#[from] PartError),
-    /// Produced by [`crate::export::write_design`] when the machining settings are unusable
-    /// (a tolerance finer than the dialect writes).
-    #[error("machining: {0}")]
-    Toolpath(#[from] ToolpathError),
-    /// Produced by [`crate::run::read_log_file`] for a malformed calibration log.
+    /// Produced by [`crate::outputs::plan`] (through the commands) when no part or program
+    /// can be planned.
+    #[error(transparent)]
+    Plan(#[from] PlanError),
+    /// Produced by [`crate::app::read_log_file`] for a malformed calibration log.
     #[error("log {path}: {source}")]
     Log {
         /// The log file.
@@ -39,16 +36,16 @@ pub enum Error {
         #[source]
         source: crate::estimate::log::LogError,
     },
-    /// Produced by [`crate::run::run_simulate`] when the run cannot be simulated.
+    /// Produced by [`crate::app::run_simulate`] when the run cannot be simulated.
     #[error("simulate: {0}")]
     Simulate(#[from] crate::estimate::sim::SimError),
-    /// Produced by [`crate::run::run_identify`] when the log cannot identify the spring.
+    /// Produced by [`crate::app::run_identify`] when the log cannot identify the spring.
     #[error("identify: {0}")]
     Identify(#[from] crate::estimate::identify::IdentifyError),
-    /// Produced by [`crate::run::run_estimate`] and [`crate::run::run_validate`] when the
+    /// Produced by [`crate::app::run_estimate`] and [`crate::app::run_validate`] when the
     /// filter diverges or the log is too short for it.
-    #[error("estimate: {0}")]
-    Estimate(#[from] crate::estimate::ekf::EkfError),
+    #[error(transparent)]
+    Estimate(#[from] crate::estimate::pipeline::EstimateError),
     /// Produced by the commands for an unusable option value.
     #[error("{0}")]
     Argument(String),
@@ -61,23 +58,9 @@ pub enum Error {
         #[source]
         source: std::io::Error,
     },
-    /// Produced by the exporters when an output cannot be written.
-    #[error("cannot write {path}: {source}")]
-    Write {
-        /// The file.
-        path: PathBuf,
-        /// The OS error.
-        #[source]
-        source: std::io::Error,
-    },
-    /// Produced by the exporters when an output cannot be encoded.
-    #[error("cannot encode {what}: {message}")]
-    Encode {
-        /// Which output.
-        what: &'static str,
-        /// Why.
-        message: String,
-    },
+    /// Produced by the exporters when an output cannot be written or encoded.
+    #[error(transparent)]
+    Export(#[from] ExportError),
 }
 
 impl Error {
@@ -87,8 +70,7 @@ impl Error {
             self,
             Error::Spec { .. }
                 | Error::Design(_)
-                | Error::Part(_)
-                | Error::Toolpath(_)
+                | Error::Plan(PlanError::Part(_) | PlanError::Toolpath(_))
                 | Error::Read { .. }
                 | Error::Log { .. }
                 | Error::Simulate(_)

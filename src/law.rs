@@ -4,71 +4,13 @@
 //! L0, relative force error C0 at L0 for a deflection error delta0) the exponent alpha = k2*L0
 //! is the positive root of the paper's eq. (5), solved here in the better-conditioned form
 //! h(alpha) = (Fr - 1) - Sr*(exp((Lr-1)*alpha) - 1)/alpha, which has the meaningless root
-//! alpha = 0 divided out. See `shared/notes/physics.md` section 1 and README for why the root
-//! differs from the value printed in the paper.
+//! alpha = 0 divided out. See docs/THEORY.md ("The law") for why the root differs
+//! from the value printed in the paper.
 
 use roots::{find_root_brent, SimpleConvergency};
 use serde::Serialize;
 
-/// The force law F(x) = mu*exp(k2*x) + F0 over deflection x >= 0 (N, mm).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct ExpLaw {
-    /// Coefficient mu.
-    pub mu_n: f64,
-    /// Exponent rate k2 = alpha / L0.
-    pub k2_per_mm: f64,
-    /// Offset F0.
-    pub f0_n: f64,
-}
-
-impl ExpLaw {
-    /// Force at deflection `x_mm`.
-    pub fn force_n(&self, x_mm: f64) -> f64 {
-        self.mu_n * (self.k2_per_mm * x_mm).exp() + self.f0_n
-    }
-
-    /// Stiffness dF/dx at deflection `x_mm` (= k2*(F - F0)).
-    pub fn stiffness_n_per_mm(&self, x_mm: f64) -> f64 {
-        self.k2_per_mm * self.mu_n * (self.k2_per_mm * x_mm).exp()
-    }
-
-    /// Work done from 0 to `x_mm`: E(x) = (mu/k2)*(exp(k2 x) - 1) + F0*x, in N*mm.
-    pub fn energy_nmm(&self, x_mm: f64) -> f64 {
-        self.mu_n / self.k2_per_mm * (self.k2_per_mm * x_mm).exp_m1() + self.f0_n * x_mm
-    }
-}
-
-/// Design targets for the law (paper section II-B).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct LawTargets {
-    /// Force at the maximum deflection.
-    pub fmax_n: f64,
-    /// Force at the rest length L0.
-    pub fmin_n: f64,
-    /// Maximum deflection.
-    pub xmax_mm: f64,
-    /// Rest length L0 (the deflection at which Fmin and C0 hold).
-    pub l0_mm: f64,
-    /// Relative force error at L0 for a deflection error delta0.
-    pub c0: f64,
-    /// Minimum sensible deflection (the deflection error behind C0).
-    pub delta0_mm: f64,
-}
-
-impl LawTargets {
-    /// Fr = Fmax / Fmin.
-    pub fn force_ratio(&self) -> f64 {
-        self.fmax_n / self.fmin_n
-    }
-    /// Lr = Xmax / L0.
-    pub fn length_ratio(&self) -> f64 {
-        self.xmax_mm / self.l0_mm
-    }
-    /// Sr = C0 * L0 / delta0.
-    pub fn sensitivity_ratio(&self) -> f64 {
-        self.c0 * self.l0_mm / self.delta0_mm
-    }
-}
+use crate::model::{ExpLaw, LawTargets};
 
 /// Relative residuals of the three design conditions for a solved law.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -208,7 +150,7 @@ pub fn solve_alpha(t: &LawTargets) -> Result<f64, LawError> {
 /// Solves the targets for alpha, mu, F0 and k2.
 ///
 /// ```
-/// use camspring::law::{solve, LawTargets};
+/// use camspring::{law::solve, LawTargets};
 /// let t = LawTargets { fmax_n: 200.0, fmin_n: 5.0, xmax_mm: 20.0, l0_mm: 5.0, c0: 0.2, delta0_mm: 1.0 };
 /// let solved = solve(&t).unwrap();
 /// assert!((solved.alpha.unwrap() - 1.3201914760).abs() < 1e-9);
@@ -267,7 +209,7 @@ mod tests {
 
     #[test]
     fn printed_paper_alpha_is_not_a_root() {
-        // The paper prints alpha = 1.3288; physics.md: residual of eq. (5) there is about -3.9.
+        // The paper prints alpha = 1.3288; docs/THEORY.md: residual of eq. (5) there is about -3.9.
         let (fr, lr, sr) = (40.0_f64, 4.0_f64, 1.0_f64);
         let a = 1.3288_f64;
         let eq5 = a * a.exp() * (fr - 1.0) + sr * a.exp() - sr * (lr * a).exp();

@@ -12,9 +12,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::cam::checks::Status;
-use crate::cam::follower::FrictionSource;
-use crate::export::plot::{self, Panel, Series};
-use crate::spec::Spec;
+use crate::model::{FrictionSource, Spec};
 
 /// A follower setting the sweep can vary.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -48,27 +46,6 @@ impl SweepKey {
             SweepKey::Preload => "preload Yp (mm)",
             SweepKey::RollerRadius => "roller radius r (mm)",
             SweepKey::Friction => "friction coefficient",
-        }
-    }
-
-    fn check(self, v: f64) -> Result<(), String> {
-        let ok = match self {
-            SweepKey::SpringRate => v > 0.0,
-            SweepKey::Preload | SweepKey::RollerRadius => v >= 0.0,
-            SweepKey::Friction => (0.0..1.0).contains(&v),
-        };
-        if ok && v.is_finite() {
-            Ok(())
-        } else {
-            Err(format!(
-                "{} = {v} is outside its range ({})",
-                self.column(),
-                match self {
-                    SweepKey::SpringRate => "> 0",
-                    SweepKey::Preload | SweepKey::RollerRadius => ">= 0",
-                    SweepKey::Friction => "0 to below 1",
-                }
-            ))
         }
     }
 
@@ -132,10 +109,21 @@ pub fn parse_axis(text: &str) -> Result<Axis, String> {
     } else {
         spec.split(',').map(number).collect::<Result<Vec<_>, _>>()?
     };
-    for &v in &values {
-        key.check(v).map_err(|e| format!("--vary {text}: {e}"))?;
-    }
     Ok(Axis { key, values })
+}
+
+/// Checks every value of every axis against the spec's own rules ([`Spec::validate`]), so a
+/// sweep refuses exactly what a spec file would, naming the key.
+pub fn check_axes(spec: &Spec, axes: &[Axis]) -> Result<(), String> {
+    for axis in axes {
+        for &v in &axis.values {
+            let mut s = spec.clone();
+            axis.key.apply(&mut s, v);
+            s.validate()
+                .map_err(|e| format!("--vary {}={v}: {e}", axis.key.column()))?;
+        }
+    }
+    Ok(())
 }
 
 /// What one grid point gave.
@@ -185,134 +173,21 @@ pub fn sweep(spec: &Spec, axes: &[Axis], progress: &(dyn Fn() + Sync)) -> Vec<Sw
                 axis.key.apply(&mut s, v);
             }
             let result = crate::design::design(&s)
-                .map(|d| {
-                    let summary = crate::export::summarize(&d, &[]);
-                    PointResult {
-                        status: summary.status,
-                        lift_mm: summary.profile.lift_mm,
-                        max_pressure_angle_deg: summary.profile.max_pressure_angle_deg,
-                        max_contact_stress_mpa: summary.profile.max_contact_stress_mpa,
-                        failed_checks: summary
-                            .checks
-                            .iter()
-                            .filter(|c| c.status == Status::Fail)
-                            .map(|c| c.name)
-                            .collect(),
-                    }
+                .map(|d| PointResult {
+                    status: d.status(),
+                    lift_mm: d.pitch_curve.lift_mm(),
+                    max_pressure_angle_deg: d.pitch_curve.max_pressure_angle().0,
+                    max_contact_stress_mpa: d.max_contact_stress_mpa(),
+                    failed_checks: d
+                        .checks
+                        .iter()
+                        .filter(|c| c.status == Status::Fail)
+                        .map(|c| c.name)
+                        .collect(),
                 })
                 .map_err(|e| e.to_string());
             progress();
             SweepPoint { values, result }
         })
         .collect()
-}
-
-/// `sweep.csv`: the axis values, then status, lift_mm, max_pressure_angle_deg,
-/// max_contact_stress_mpa, failed_checks (space-separated) and error.
-pub fn sweep_csv(axes: &[Axis], points: &[SweepPoint]) -> Vec<u8> {
-    use std::fmt::Write as _;
-    let mut out = String::new();
-    for a in axes {
-        let _ = write!(out, "{},", a.key.column());
-    }
-    out.push_str(
-        "status,lift_mm,max_pressure_angle_deg,max_contact_stress_mpa,failed_checks,error\n",
-    );
-    for p in points {
-        for v in &p.values {
-            let _ = write!(out, "{v},");
-        }
-        match &p.result {
-            Ok(r) => {
-                let _ = writeln!(
-                    out,
-                    "{},{:.6},{:.4},{},{},",
-                    r.status.as_str(),
-                    r.lift_mm,
-                    r.max_pressure_angle_deg,
-                    r.max_contact_stress_mpa
-                        .map_or(String::new(), |v| format!("{v:.3}")),
-                    r.failed_checks.join(" ")
-                );
-            }
-            Err(e) => {
-                let _ = writeln!(out, "error,,,,,\"{}\"", e.replace('"', "'"));
-            }
-        }
-    }
-    out.into_bytes()
-}
-
-/// `sweep.svg`: largest pressure angle, lift and contact stress against the first axis, one
-/// line per value of the second axis (points of failing designs are left out of the lines
-/// and drawn as dots).
-pub fn sweep_svg(axes: &[Axis], points: &[SweepPoint]) -> String {
-    let colours = [
-        "#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#7f7f7f",
-        "#bcbd22", "#17becf",
-    ];
-    let groups: Vec<Option<f64>> = match axes.get(1) {
-        Some(a) => a.values.iter().map(|&v| Some(v)).collect(),
-        None => vec![None],
-    };
-    let panel = |title: &str, label: &str, get: &dyn Fn(&PointResult) -> Option<f64>| {
-        let mut series = Vec::new();
-        for (i, g) in groups.iter().enumerate() {
-            let in_group = |p: &&SweepPoint| g.is_none_or(|v| p.values.get(1) == Some(&v));
-            let ok: Vec<(f64, f64)> = points
-                .iter()
-                .filter(in_group)
-                .filter_map(|p| match &p.result {
-                    Ok(r) if r.status != Status::Fail => get(r).map(|y| (p.values[0], y)),
-                    _ => None,
-                })
-                .collect();
-            let failing: Vec<(f64, f64)> = points
-                .iter()
-                .filter(in_group)
-                .filter_map(|p| match &p.result {
-                    Ok(r) if r.status == Status::Fail => get(r).map(|y| (p.values[0], y)),
-                    _ => None,
-                })
-                .collect();
-            let colour = colours[i % colours.len()];
-            let name = match (g, axes.get(1)) {
-                (Some(v), Some(a)) => format!("{} = {v:.4}", a.key.column()),
-                _ => "makeable designs".into(),
-            };
-            series.push(Series {
-                label: name,
-                points: ok,
-                color: colour,
-                dashed: false,
-                dots: false,
-            });
-            if !failing.is_empty() {
-                series.push(Series {
-                    label: String::new(),
-                    points: failing,
-                    color: colour,
-                    dashed: false,
-                    dots: true,
-                });
-            }
-        }
-        Panel {
-            title: format!("{title} (dots: a check fails)"),
-            x_label: axes[0].key.label().into(),
-            y_label: label.into(),
-            series,
-            ..Default::default()
-        }
-    };
-    let panels = [
-        panel("Largest pressure angle", "pressure angle (deg)", &|r| {
-            Some(r.max_pressure_angle_deg)
-        }),
-        panel("Follower lift at Xmax", "lift (mm)", &|r| Some(r.lift_mm)),
-        panel("Peak contact stress", "contact stress (MPa)", &|r| {
-            r.max_contact_stress_mpa
-        }),
-    ];
-    plot::document(&panels, 520.0, 440.0).to_string()
 }

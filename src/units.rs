@@ -24,6 +24,10 @@ pub enum Dimension {
     FeedRate,
     /// Rotational speed; default rev/min.
     RotationalSpeed,
+    /// Time; default s.
+    Time,
+    /// Frequency (sampling rate); default Hz.
+    Frequency,
     /// A pure number (ratios, coefficients).
     Dimensionless,
 }
@@ -43,6 +47,8 @@ impl Dimension {
             Dimension::Stress => "MPa",
             Dimension::FeedRate => "mm/min",
             Dimension::RotationalSpeed => "rpm",
+            Dimension::Time => "s",
+            Dimension::Frequency => "Hz",
             Dimension::Dimensionless => "",
         }
     }
@@ -58,6 +64,8 @@ impl Dimension {
             Dimension::Stress => "a stress such as \"460 MPa\"",
             Dimension::FeedRate => "a feed rate such as \"600 mm/min\"",
             Dimension::RotationalSpeed => "a spindle speed such as \"8000 rpm\"",
+            Dimension::Time => "a duration such as \"300s\"",
+            Dimension::Frequency => "a rate such as \"100Hz\"",
             Dimension::Dimensionless => "a plain number",
         }
     }
@@ -130,6 +138,14 @@ impl Dimension {
                 ("1/min", 1.0),
                 ("rev/s", 60.0),
             ],
+            Dimension::Time => &[
+                ("s", 1.0),
+                ("ms", 1e-3),
+                ("us", 1e-6),
+                ("min", 60.0),
+                ("h", 3600.0),
+            ],
+            Dimension::Frequency => &[("Hz", 1.0), ("hz", 1.0), ("kHz", 1e3), ("khz", 1e3)],
             Dimension::Dimensionless => &[],
         }
     }
@@ -219,9 +235,66 @@ fn number_prefix_len(text: &str) -> usize {
     best
 }
 
+/// Parses a positive quantity of `dimension`, such as a duration or a rate; the message says
+/// what was found and what is expected.
+fn parse_positive(text: &str, dimension: Dimension) -> Result<f64, String> {
+    match parse_quantity(text, dimension) {
+        Ok(v) if v > 0.0 => Ok(v),
+        Err(UnitError::UnknownUnit { unit, .. }) => Err(format!(
+            "\"{text}\": unknown unit \"{unit}\" (units: {})",
+            dimension.unit_list()
+        )),
+        _ => Err(format!(
+            "\"{text}\": expected a positive value, {}",
+            dimension.describe()
+        )),
+    }
+}
+
+/// Parses a duration such as "300s", "300 s", "5min", "1h", "250ms" or a plain number of
+/// seconds.
+pub fn parse_duration_s(text: &str) -> Result<f64, String> {
+    parse_positive(text, Dimension::Time)
+}
+
+/// Parses a rate such as "100Hz", "1 kHz" or a plain number of hertz.
+pub fn parse_rate_hz(text: &str) -> Result<f64, String> {
+    parse_positive(text, Dimension::Frequency)
+}
+
+/// Parses a relative tolerance such as "10%" or "0.1", strictly between 0 and 1.
+pub fn parse_fraction(text: &str) -> Result<f64, String> {
+    let t = text.trim();
+    let v = match t.strip_suffix('%') {
+        Some(p) => p.trim().parse::<f64>().map(|v| v / 100.0),
+        None => t.parse::<f64>(),
+    };
+    match v {
+        Ok(v) if v.is_finite() && v > 0.0 && v < 1.0 => Ok(v),
+        _ => Err(format!(
+            "\"{text}\": expected a fraction between 0 and 100 %, such as \"10%\""
+        )),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn parses_durations_rates_and_fractions() {
+        assert_eq!(parse_duration_s("300s").unwrap(), 300.0);
+        assert_eq!(parse_duration_s("2 min").unwrap(), 120.0);
+        assert_eq!(parse_duration_s("250ms").unwrap(), 0.25);
+        assert_eq!(parse_rate_hz("1kHz").unwrap(), 1000.0);
+        assert_eq!(parse_fraction("10%").unwrap(), 0.1);
+        assert!(parse_duration_s("-1s").is_err());
+        assert!(parse_duration_s("3 fortnights")
+            .unwrap_err()
+            .contains("fortnights"));
+        assert!(parse_rate_hz("NaN").is_err());
+        assert!(parse_fraction("150%").is_err());
+    }
 
     #[test]
     fn converts_to_default_units() {

@@ -5,12 +5,12 @@ mod common;
 
 use camspring::estimate::allan::{allan_variance, white_noise_fit};
 use camspring::estimate::identify::{
-    identify, identify_with_window, Identification, SensorNoise, PARAMS,
+    identify, identify_with_window, Identification, Param, SensorNoise, PARAMS,
 };
 use camspring::estimate::log::{read_log, write_log, CalibrationLog, ColumnMap, LogError};
-use camspring::estimate::report::noise_model;
+use camspring::estimate::noise::noise_model;
 use camspring::estimate::sim::{simulate, Dynamics, Noise, Profile, SimSettings, Truth};
-use camspring::law::ExpLaw;
+use camspring::model::ExpLaw;
 use rand::{rngs::StdRng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 
@@ -48,10 +48,9 @@ fn truth_values(law: &ExpLaw, d: &Dynamics) -> [f64; 7] {
 fn z_scores(id: &Identification, truth: &Truth) -> [Option<f64>; 7] {
     let t = truth_values(&truth.law, &truth.dynamics);
     let mut z = [None; 7];
-    for (k, name) in PARAMS.iter().enumerate() {
-        let e = id.get(name).unwrap();
+    for (p, e) in id.parameters.iter() {
         if let (Some(v), Some(s)) = (e.value, e.std) {
-            z[k] = Some((v - t[k]) / s);
+            z[p.index()] = Some((v - t[p.index()]) / s);
         }
     }
     z
@@ -80,8 +79,8 @@ fn identification_recovers_the_truth_within_three_sigma_on_every_profile() {
                     );
                 }
             }
-            let k2 = id.get("k2_per_mm").unwrap().value.unwrap();
-            let mu = id.get("mu_n").unwrap().value.unwrap();
+            let k2 = id.get(Param::K2).value.unwrap();
+            let mu = id.get(Param::Mu).value.unwrap();
             assert!((k2 / law.k2_per_mm - 1.0).abs() < 0.01, "k2 {k2}");
             assert!((mu / law.mu_n - 1.0).abs() < 0.01, "mu {mu}");
             // Everything but the inertia is identifiable on every profile; the slow
@@ -153,8 +152,9 @@ fn noise_free_logs_give_the_parameters_without_filter_bias() {
     )
     .unwrap();
     let t = truth_values(&truth.law, &truth.dynamics);
-    for (k, name) in PARAMS.iter().enumerate() {
-        let v = id.get(name).unwrap().value.unwrap();
+    for (p, e) in id.parameters.iter() {
+        let (k, name) = (p.index(), p.key());
+        let v = e.value.unwrap();
         // Relative to the size of each term (d2 acts on xd^3 and is tiny).
         let tol = if k == 3 { 1e-2 } else { 1e-3 };
         assert!((v / t[k] - 1.0).abs() < tol, "{name}: {v} against {}", t[k]);
@@ -195,15 +195,19 @@ fn poor_excitation_names_the_parameters_this_log_cannot_identify() {
             "m_n_s2_per_mm".to_string()
         ]
     );
-    let text = camspring::estimate::report::format_identification(&id);
+    let text = camspring::render::calibration::format_identification(&id);
     assert!(
         text.contains("not identifiable (poor excitation): d0_n, d2_n_s3_per_mm3, m_n_s2_per_mm"),
         "{text}"
     );
     for name in &id.not_identifiable {
-        assert_eq!(id.get(name).unwrap().value, None, "{name} printed");
+        assert_eq!(
+            id.get(Param::from_key(name).unwrap()).value,
+            None,
+            "{name} printed"
+        );
     }
-    let k2 = id.get("k2_per_mm").unwrap();
+    let k2 = id.get(Param::K2);
     assert!(
         (k2.value.unwrap() / law.k2_per_mm - 1.0).abs()
             < 3.0 * k2.std.unwrap() / law.k2_per_mm + 1e-3

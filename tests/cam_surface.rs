@@ -3,9 +3,9 @@
 
 mod common;
 
-use camspring::cam::follower::FrictionCorrection as FC;
 use camspring::cam::pitch_curve::synthesize;
 use camspring::cam::surface::offset;
+use camspring::model::FrictionCorrection as FC;
 use common::*;
 
 /// Distance from a point to a segment.

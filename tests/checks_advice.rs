@@ -3,7 +3,7 @@
 
 use camspring::cam::checks::{Check, Status, Suggestion};
 use camspring::design::design;
-use camspring::spec::{Spec, DEFAULT_SPEC_TOML};
+use camspring::{spec::DEFAULT_SPEC_TOML, Spec};
 
 fn paper() -> Spec {
     Spec::from_toml(DEFAULT_SPEC_TOML).unwrap()
@@ -86,10 +86,9 @@ fn pressure_angle_advice_gives_the_spring_rate_or_preload_that_meets_the_limit()
 fn a_spring_that_cannot_return_the_rod_is_told_the_largest_preload() {
     let mut spec = paper();
     spec.follower.preload_mm = 4.0;
-    spec.follower.friction =
-        camspring::cam::follower::FrictionSource::Coefficient { coefficient: 0.1 };
+    spec.follower.friction = camspring::model::FrictionSource::Coefficient { coefficient: 0.1 };
     // A loading-corrected curve cannot exist here (friction 4 N > F(0) = 2.22 N): use `none`.
-    spec.follower.friction_correction = camspring::cam::follower::FrictionCorrection::None;
+    spec.follower.friction_correction = camspring::model::FrictionCorrection::None;
     let c = check(&spec, "self_locking");
     assert!(c.value.unwrap() < 0.0, "{c:?}");
     advice_fixes(spec, "self_locking", &["follower.preload"]);

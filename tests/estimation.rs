@@ -4,13 +4,14 @@
 
 mod common;
 
+use camspring::app::estimate_log;
 use camspring::estimate::ekf::{derivative, idx, jacobian, Discretization, ForceRate, State};
 use camspring::estimate::identify::SensorNoise;
 use camspring::estimate::log::CalibrationLog;
+use camspring::estimate::pipeline::{EstimateInit, EstimateOptions, EstimateRun};
 use camspring::estimate::sim::{simulate, Dynamics, Noise, Profile, SimSettings, Truth};
-use camspring::estimate::validate::validate;
-use camspring::law::ExpLaw;
-use camspring::run::{estimate_log, EstimateInit, EstimateOptions, EstimateRun};
+use camspring::model::ExpLaw;
+use camspring::verdict::validate::validate;
 
 /// The simulator's default transmission (of the order of the paper's Table II), so that the
 /// EKF has something to estimate (the light one's m = 2e-3 is below the paper's noise).
@@ -126,7 +127,7 @@ fn rk4_recovers_noise_free_parameters_and_euler_shows_its_bias() {
     assert!(rms_error(&rk4, idx::SIGMA, &truth.sigma_n_per_mm) < 2e-3);
     assert!(rms_error(&rk4, idx::D, &truth.d_n_s_per_mm) < 2e-3);
 
-    // physics.md: Euler lags half a sample, so D comes out near D - (T/2) sigma, M is off
+    // docs/THEORY.md: Euler lags half a sample, so D comes out near D - (T/2) sigma, M is off
     // and d2 is not identified.
     // Its half-sample lag leaves innovations far outside their covariance, which the
     // divergence check would stop: widen it to see where Euler settles.
@@ -188,7 +189,7 @@ fn converged_estimates_meet_the_bounds_on_noisy_logs() {
 fn validate_built_against(
     built: &ExpLaw,
     designed: &ExpLaw,
-) -> camspring::estimate::validate::Validation {
+) -> camspring::verdict::validate::Validation {
     let (log, _) = sim(built, Profile::Sines, 300.0, 4, Noise::default());
     let est = estimate_log(&log, &options(Noise::default(), Discretization::Rk4), false).unwrap();
     validate(
@@ -238,7 +239,10 @@ fn divergence_stops_with_the_sample_index() {
         *x += 40.0;
     }
     let opts = EstimateOptions {
-        init: EstimateInit::Spec(format!("{}/specs/paper.toml", env!("CARGO_MANIFEST_DIR")).into()),
+        init: EstimateInit::Law {
+            law: common::paper_law(),
+            xmax_mm: 20.0,
+        },
         ..options(Noise::default(), Discretization::Rk4)
     };
     let err = estimate_log(&log, &opts, false).unwrap_err().to_string();

@@ -4,9 +4,12 @@
 
 use camspring::design::design;
 use camspring::export::step::solid;
-use camspring::export::stl::{mesh, rings};
+use camspring::part::mesh::{mesh, rings};
 use camspring::part::{build, Part, PartError};
-use camspring::spec::{Hole, Spec, DEFAULT_SPEC_TOML};
+use camspring::{
+    model::{Hole, Spec},
+    spec::DEFAULT_SPEC_TOML,
+};
 use truck_modeling::{BSplineCurve, KnotVec, ParametricCurve, Point3};
 use truck_topology::shell::ShellCondition;
 

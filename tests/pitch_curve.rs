@@ -1,11 +1,11 @@
 //! Pitch-curve accuracy against independent truth: the closed-form frictionless lift, a
-//! separate fixed-step RK4 of the friction ODE in physics.md, and the forward force model.
+//! separate fixed-step RK4 of the friction ODE in docs/THEORY.md, and the forward force model.
 
 mod common;
 
-use camspring::cam::follower::FrictionCorrection as FC;
 use camspring::cam::forces::rod_force;
 use camspring::cam::pitch_curve::{frictionless_lift_mm, synthesize, SynthesisOptions};
+use camspring::model::FrictionCorrection as FC;
 use common::*;
 
 #[test]
@@ -44,7 +44,7 @@ fn friction_corrected_curves_match_an_independent_rk4() {
     ] {
         let f = follower(2, 5.0, yp, 3.0, mu, corr);
         let pitch = synthesize(&law, &f, 20.0, &fine()).unwrap();
-        // dY/dx written from the force relations of physics.md, independently of the crate:
+        // dY/dx written from the force relations of docs/THEORY.md, independently of the crate:
         let slope = |x: f64, y: f64| {
             let force = law.force_n(x);
             let q = k * (y + yp);

@@ -1,12 +1,13 @@
 //! Property tests: every accepted spec gives valid geometry or a clear error, never a panic.
 
 use camspring::cam::checks::Status;
-use camspring::cam::follower::FrictionCorrection;
 use camspring::design::design;
-use camspring::export::{step, stl};
+use camspring::export::step;
+use camspring::model::FrictionCorrection;
+use camspring::part::mesh;
 use camspring::part::{build, PartError};
-use camspring::spec::Spec;
 use camspring::units::{parse_quantity, Dimension};
+use camspring::Spec;
 use proptest::prelude::*;
 
 #[derive(Debug, Clone)]
@@ -170,8 +171,8 @@ proptest! {
                             solid.boundaries()[0].shell_condition(),
                             truck_topology::shell::ShellCondition::Closed
                         );
-                        let rings = stl::rings(&part, spec.output.stl_tolerance_mm, spec.output.chord_tolerance_mm);
-                        let tris = stl::mesh(&rings, part.thickness_mm).expect("mesh");
+                        let rings = mesh::rings(&part, spec.output.stl_tolerance_mm, spec.output.chord_tolerance_mm);
+                        let tris = mesh::mesh(&rings, part.thickness_mm).expect("mesh");
                         prop_assert!(watertight(&tris), "mesh not watertight");
                         prop_assert!(part.area_mm2 > 0.0);
                         for e in &part.cam_edges {

@@ -1,12 +1,12 @@
-//! The reference numbers of shared/notes/physics.md, computed independently of this crate
+//! The reference numbers of docs/THEORY.md, computed independently of this crate
 //! (closed forms and a separate SciPy DOP853 run recorded in the note), reproduced here.
 
 mod common;
 
-use camspring::cam::follower::FrictionCorrection as FC;
 use camspring::cam::forces::rod_force;
 use camspring::cam::pitch_curve::synthesize;
 use camspring::cam::surface::offset;
+use camspring::model::FrictionCorrection as FC;
 use common::*;
 
 #[test]
@@ -63,12 +63,12 @@ fn start_curvature_without_preload_is_force_over_rate() {
     .unwrap();
     let rho0 = -1.0 / pitch.samples[0].curvature_per_mm;
     assert_near(rho0, law.force_n(0.0) / 5.0, 1e-12, "rho(0) = F(0)/ks");
-    assert_near(rho0, 0.445, 5e-4, "rho(0) from physics.md");
+    assert_near(rho0, 0.445, 5e-4, "rho(0) from docs/THEORY.md");
 }
 
 #[test]
 fn five_mm_roller_undercuts_near_the_start() {
-    // physics.md: a 5 mm roller on the single-follower paper cam undercuts over x in [0, 0.7] mm
+    // docs/THEORY.md: a 5 mm roller on the single-follower paper cam undercuts over x in [0, 0.7] mm
     // (rounded). The closed form Y = sqrt(2E/ks) gives rho(x) = 5 mm at x = 0.78709 mm (root of
     // the analytic radius of curvature, computed with SciPy's brentq).
     let law = paper_law();
@@ -94,7 +94,7 @@ fn five_mm_roller_undercuts_near_the_start() {
 
 #[test]
 fn hysteresis_of_a_loading_corrected_cam() {
-    // physics.md: mu_f = 0.1 on the paper example (single follower, ks = 5, no preload),
+    // docs/THEORY.md: mu_f = 0.1 on the paper example (single follower, ks = 5, no preload),
     // cam corrected for loading: the unloading force at Xmax falls from 200 N to about 121.5 N.
     // (A SciPy DOP853 integration of the same ODE gives 121.524 N.)
     let law = paper_law();

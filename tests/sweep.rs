@@ -3,8 +3,9 @@
 
 use camspring::cam::checks::Status;
 use camspring::design::design;
-use camspring::spec::{Spec, DEFAULT_SPEC_TOML};
-use camspring::sweep::{parse_axis, sweep, sweep_csv, SweepKey};
+use camspring::render::sweep::sweep_csv;
+use camspring::sweep::{check_axes, parse_axis, sweep, SweepKey};
+use camspring::{spec::DEFAULT_SPEC_TOML, Spec};
 
 #[test]
 fn axes_parse_ranges_counts_and_lists() {
@@ -22,8 +23,6 @@ fn axes_parse_ranges_counts_and_lists() {
     );
     for (bad, why) in [
         ("stiffness=1..2", "unknown key"),
-        ("spring_rate=0..10", "outside its range"),
-        ("friction=0..1.5", "outside its range"),
         ("preload=a..b", "not a number"),
         ("preload=0..1:1", "2 to 200"),
         ("preload", "expected KEY="),
@@ -31,6 +30,22 @@ fn axes_parse_ranges_counts_and_lists() {
         let e = parse_axis(bad).unwrap_err();
         assert!(e.contains(why), "{bad}: {e}");
     }
+}
+
+#[test]
+fn axis_values_meet_the_spec_rules_naming_the_key() {
+    let paper = Spec::from_toml(DEFAULT_SPEC_TOML).unwrap();
+    let ankle = Spec::from_toml(include_str!("../specs/ankle.toml")).unwrap();
+    for (spec, axis, key) in [
+        (&paper, "spring_rate=0..10", "follower.spring_rate"),
+        (&paper, "friction=0..1.5", "follower.friction"),
+        // The ankle's roller turns on a pin: a roller smaller than the pin is refused.
+        (&ankle, "roller_radius=1..9", "follower.pin_radius"),
+    ] {
+        let e = check_axes(spec, &[parse_axis(axis).unwrap()]).unwrap_err();
+        assert!(e.contains(key), "{axis}: {e}");
+    }
+    assert!(check_axes(&paper, &[parse_axis("friction=0..0.5").unwrap()]).is_ok());
 }
 
 #[test]

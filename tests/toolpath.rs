@@ -3,9 +3,12 @@
 
 use camspring::design::design;
 use camspring::part::build;
-use camspring::spec::{Hole, Spec, DEFAULT_SPEC_TOML};
 use camspring::toolpath::path::{sample_move, Move};
 use camspring::toolpath::{contour, gcode, passes, ToolpathError};
+use camspring::{
+    model::{Hole, Spec},
+    spec::DEFAULT_SPEC_TOML,
+};
 
 fn paper() -> Spec {
     Spec::from_toml(DEFAULT_SPEC_TOML).unwrap()
@@ -136,7 +139,7 @@ fn refusals_say_what_to_change() {
     ));
     let mut spec = paper();
     spec.machining.tolerance_mm = 1e-4;
-    spec.machining.dialect = camspring::spec::Dialect::Grbl;
+    spec.machining.dialect = camspring::model::Dialect::Grbl;
     let d = design(&spec).unwrap();
     assert!(matches!(
         passes(&d, &build(&d).unwrap()),

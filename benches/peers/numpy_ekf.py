@@ -1,5 +1,5 @@
 """What a user would do instead of `camspring estimate`: the same EKF (the model of
-physics.md section 3, RK4 prediction, Phi = I + A T + (A T)^2 / 2, Joseph update) written with
+docs/THEORY.md section 3, RK4 prediction, Phi = I + A T + (A T)^2 / 2, Joseph update) written with
 numpy, one sample at a time, run on the same log with the same initial state and tuning.
 
 Usage (from the repository root, after `scripts/test` made .venv and `cargo build --release`):

@@ -1,5 +1,5 @@
 """What a user would do instead: integrate the same loading-corrected pitch-curve ODE of
-physics.md with SciPy's DOP853 at the same tolerance, for the default spec (two followers,
+docs/THEORY.md with SciPy's DOP853 at the same tolerance, for the default spec (two followers,
 5 N/mm each, preload 1.5 mm, friction 0.01, loading correction), and time it.
 
 Usage: python benches/peers/scipy_pitch_curve.py   (needs numpy and scipy)

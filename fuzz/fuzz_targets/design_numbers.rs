@@ -52,7 +52,7 @@ tabs = {tabs}
         depth = n(14, 0.1, 1.0),
         tabs = (n(15, 0.0, 4.99)) as u32,
     );
-    let Ok(spec) = camspring::spec::Spec::from_toml(&text) else {
+    let Ok(spec) = camspring::Spec::from_toml(&text) else {
         return;
     };
     let Ok(design) = camspring::design::design(&spec) else {
@@ -60,6 +60,6 @@ tabs = {tabs}
     };
     if let Ok(part) = camspring::part::build(&design) {
         let _ = camspring::export::step::step_text(&part, "fuzz");
-        let _ = camspring::export::gcode_files(&design, &part);
+        let _ = camspring::toolpath::passes(&design, &part);
     }
 });

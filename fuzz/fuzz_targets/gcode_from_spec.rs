@@ -7,13 +7,13 @@ fuzz_target!(|data: &[u8]| {
     let Ok(text) = std::str::from_utf8(data) else {
         return;
     };
-    let Ok(spec) = camspring::spec::Spec::from_toml(text) else {
+    let Ok(spec) = camspring::Spec::from_toml(text) else {
         return;
     };
     let Ok(design) = camspring::design::design(&spec) else {
         return;
     };
     if let Ok(part) = camspring::part::build(&design) {
-        let _ = camspring::export::gcode_files(&design, &part);
+        let _ = camspring::toolpath::passes(&design, &part);
     }
 });

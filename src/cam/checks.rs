@@ -8,12 +8,12 @@
 use roots::{find_root_brent, SimpleConvergency};
 use serde::Serialize;
 
-use super::follower::Follower;
 use super::forces::RodForce;
 use super::pitch_curve::{synthesize, PitchCurve, SynthesisOptions};
 use super::surface::CamSurface;
-use crate::law::ExpLaw;
-use crate::spec::ChecksSpec;
+use crate::model::ChecksSpec;
+use crate::model::ExpLaw;
+use crate::model::Follower;
 
 /// Outcome of a check.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize)]

@@ -10,11 +10,11 @@
 
 use serde::Serialize;
 
-use super::follower::Follower;
 use super::pitch_curve::PitchCurve;
 use super::surface::CamSurface;
-use crate::law::ExpLaw;
-use crate::spec::Material;
+use crate::model::ExpLaw;
+use crate::model::Follower;
+use crate::model::Material;
 
 /// The predicted state of the transmission at one pitch sample.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]

@@ -1,6 +1,6 @@
 //! The pitch curve: the roller-centre path Y(x) that makes the rod force follow the law.
 //!
-//! Virtual work (physics.md section 2) gives, per unit follower spring force q = k_eff*(Y+Yp),
+//! Virtual work (docs/THEORY.md section 2) gives, per unit follower spring force q = k_eff*(Y+Yp),
 //! a required rod force F = q*tan(theta) without friction and q*tan(theta +/- phi) with it.
 //! Solving for the tangent angle theta gives a direction field (a, b) with tan(theta) = b/a:
 //!
@@ -23,8 +23,8 @@ use ode_solvers::{Dop853, OutputType, System, Vector2};
 use roots::{find_root_brent, SimpleConvergency};
 use serde::Serialize;
 
-use super::follower::{Follower, FrictionCorrection};
-use crate::law::ExpLaw;
+use crate::model::ExpLaw;
+use crate::model::{Follower, FrictionCorrection};
 
 /// Tolerance of the pitch-curve integration (relative and absolute, mm).
 pub const ODE_TOLERANCE: f64 = 1e-12;
@@ -471,7 +471,7 @@ pub fn synthesize(
     Ok(PitchCurve { samples, field })
 }
 
-/// Closed-form frictionless lift: Y(x) = sqrt(Yp^2 + 2E(x)/k_eff) - Yp (physics.md section 2),
+/// Closed-form frictionless lift: Y(x) = sqrt(Yp^2 + 2E(x)/k_eff) - Yp (docs/THEORY.md section 2),
 /// written to avoid cancellation for small E.
 pub fn frictionless_lift_mm(law: &ExpLaw, k_eff: f64, preload_mm: f64, x_mm: f64) -> f64 {
     let e2 = 2.0 * law.energy_nmm(x_mm) / k_eff;
@@ -481,7 +481,7 @@ pub fn frictionless_lift_mm(law: &ExpLaw, k_eff: f64, preload_mm: f64, x_mm: f64
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cam::follower::{FrictionSource, SpringArrangement};
+    use crate::model::{FrictionSource, SpringArrangement};
 
     #[test]
     fn directions_reproduce_the_friction_relations() {

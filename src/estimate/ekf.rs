@@ -1,5 +1,5 @@
 //! On-line impedance estimation: the paper's Extended Kalman Filter (section VI), built from
-//! the derivation in physics.md section 3 rather than the printed discrete equations.
+//! the derivation in docs/THEORY.md section 3 rather than the printed discrete equations.
 //!
 //! State Z = [x, xd, xdd, sigma, D, M, k2, d2] (mm, mm/s, mm/s^2, N/mm, N s/mm, N s^2/mm, 1/mm,
 //! N s^3/mm^3). Input: the force rate u = Fdot (N/s). Measurement: the encoder position x.
@@ -11,7 +11,7 @@
 //!
 //! Prediction integrates this with one classic RK4 step per sample (the input interpolated
 //! linearly between samples), or with the paper's forward Euler for comparison. Forward Euler
-//! lags half a sample and biases D and M (physics.md). The covariance goes through the
+//! lags half a sample and biases D and M (docs/THEORY.md). The covariance goes through the
 //! transition matrix Phi = I + A T + (A T)^2 / 2 of the analytic Jacobian A; process noise is
 //! Q T (the product exploits that only five rows of A are non-zero). The update is the Joseph form written out for the position-only measurement,
 //! symmetrised. Bounds: M and sigma stay above a small positive floor. Divergence (a
@@ -26,6 +26,8 @@
 
 use nalgebra::{SMatrix, SVector};
 use serde::Serialize;
+
+use super::identify::{Identification, Param};
 
 /// The filter state.
 pub type State = SVector<f64, 8>;
@@ -428,20 +430,47 @@ pub struct EkfRun {
     pub outliers: usize,
 }
 
-/// Runs the filter from `z0` over `log` (t_s, force_n, position_mm), after computing the force
-/// rate `how`. `offsets0` starts the parallel F0, d0 filter with memory `offset_memory_s`.
-#[allow(clippy::too_many_arguments)]
+/// Memory of the parallel F0, d0 filter: the offsets it tracks drift over tens of seconds
+/// (temperature, wear), far slower than the impedance states.
+pub const OFFSET_MEMORY_S: f64 = 30.0;
+
+/// What the filter runs over and how it starts.
+#[derive(Debug, Clone, Copy)]
+pub struct EkfInput<'a> {
+    /// Sample times (s), uniformly spaced.
+    pub t_s: &'a [f64],
+    /// Measured force (N), the input after differentiation.
+    pub force_n: &'a [f64],
+    /// Measured position (mm), the measurement.
+    pub position_mm: &'a [f64],
+    /// How the force rate is computed from the force.
+    pub force_rate: ForceRate,
+    /// Initial state.
+    pub z0: State,
+    /// Tuning: Q, P0, R, bounds and outlier threshold.
+    pub settings: EkfSettings,
+    /// Initial [F0, d0] of the parallel offset filter (N).
+    pub offsets0: [f64; 2],
+    /// Memory of the parallel offset filter (s), usually [`OFFSET_MEMORY_S`].
+    pub offset_memory_s: f64,
+}
+
+/// Runs the filter from `input.z0` over the log, after computing the force rate;
+/// `progress(k, n)` is called as samples are processed.
 pub fn run(
-    t_s: &[f64],
-    force_n: &[f64],
-    position_mm: &[f64],
-    how: ForceRate,
-    z0: State,
-    settings: EkfSettings,
-    offsets0: [f64; 2],
-    offset_memory_s: f64,
+    input: EkfInput<'_>,
     mut progress: impl FnMut(usize, usize),
 ) -> Result<EkfRun, EkfError> {
+    let EkfInput {
+        t_s,
+        force_n,
+        position_mm,
+        force_rate: how,
+        z0,
+        settings,
+        offsets0,
+        offset_memory_s,
+    } = input;
     let n = t_s.len();
     if n < 3 || force_n.len() != n || position_mm.len() != n {
         return Err(EkfError::Input(format!(
@@ -554,26 +583,29 @@ pub struct EkfInit {
 impl EkfInit {
     /// From an identification (the paper's initialisation). Standard deviations are the
     /// identification's, at least 1 % of k2 and 10 % of M and d1, so that the filter can move.
-    pub fn from_identification(id: &super::identify::Identification) -> EkfInit {
-        let g = |n: &str| id.get(n).and_then(|e| e.value.zip(e.std));
+    pub fn from_identification(id: &Identification) -> EkfInit {
+        let g = |p: Param| {
+            let e = id.get(p);
+            e.value.zip(e.std)
+        };
         let k2 =
-            g("k2_per_mm").unwrap_or((id.k2_quasi_static_per_mm, 0.05 * id.k2_quasi_static_per_mm));
-        let m = g("m_n_s2_per_mm").filter(|(v, _)| *v > 0.0);
-        let d1 = g("d1_n_s_per_mm");
+            g(Param::K2).unwrap_or((id.k2_quasi_static_per_mm, 0.05 * id.k2_quasi_static_per_mm));
+        let m = g(Param::M).filter(|(v, _)| *v > 0.0);
+        let d1 = g(Param::D1);
         EkfInit {
             k2_per_mm: (k2.0, k2.1.max(0.01 * k2.0.abs())),
-            mu_n: g("mu_n").map_or(1.0, |v| v.0),
-            f0_n: g("f0_n").map_or(0.0, |v| v.0),
-            d0_n: g("d0_n").map_or(0.0, |v| v.0),
+            mu_n: g(Param::Mu).map_or(1.0, |v| v.0),
+            f0_n: g(Param::F0).map_or(0.0, |v| v.0),
+            d0_n: g(Param::D0).map_or(0.0, |v| v.0),
             // Without an identified inertia: a small one, free to move.
             m_n_s2_per_mm: m.map_or((1e-2, 1e-2), |(v, s)| (v, s.max(0.1 * v))),
             d1_n_s_per_mm: d1.map_or((0.05, 0.05), |(v, s)| (v, s.max(0.1 * v.abs()).max(1e-3))),
-            d2_n_s3_per_mm3: g("d2_n_s3_per_mm3").map_or((0.0, 1e-3), |(v, s)| (v, s.max(1e-6))),
+            d2_n_s3_per_mm3: g(Param::D2).map_or((0.0, 1e-3), |(v, s)| (v, s.max(1e-6))),
         }
     }
 
     /// From a designed law: k2 and mu exact to the design, the dynamics unknown (wide).
-    pub fn from_law(law: &crate::law::ExpLaw) -> EkfInit {
+    pub fn from_law(law: &crate::model::ExpLaw) -> EkfInit {
         EkfInit {
             k2_per_mm: (law.k2_per_mm, 0.05 * law.k2_per_mm),
             mu_n: law.mu_n,

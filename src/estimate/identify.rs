@@ -44,9 +44,69 @@ pub const PARAMS: [&str; 7] = [
     "k2_per_mm",
 ];
 
+/// A parameter of the transmission model F = m xdd + d0 sgn(xd) + d1 xd + d2 xd^3
+/// + mu exp(k2 x) + F0, in model order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+pub enum Param {
+    /// Inertia m (N s^2/mm).
+    M,
+    /// Coulomb friction d0 (N).
+    D0,
+    /// Linear damping d1 (N s/mm).
+    D1,
+    /// Cubic damping d2 (N s^3/mm^3).
+    D2,
+    /// The law's coefficient mu (N).
+    Mu,
+    /// The law's offset F0 (N).
+    F0,
+    /// The law's exponent rate k2 (1/mm).
+    K2,
+}
+
+impl Param {
+    /// Every parameter, in model order.
+    pub const ALL: [Param; 7] = [
+        Param::M,
+        Param::D0,
+        Param::D1,
+        Param::D2,
+        Param::Mu,
+        Param::F0,
+        Param::K2,
+    ];
+
+    /// Position in the parameter vector.
+    pub const fn index(self) -> usize {
+        self as usize
+    }
+
+    /// The unit-bearing name (JSON key), e.g. `k2_per_mm`.
+    pub fn key(self) -> &'static str {
+        PARAMS[self.index()]
+    }
+
+    /// The parameter with this unit-bearing name.
+    pub fn from_key(key: &str) -> Option<Param> {
+        Param::ALL.into_iter().find(|p| p.key() == key)
+    }
+}
+
+const M: usize = Param::M.index();
+const D0: usize = Param::D0.index();
+const D1: usize = Param::D1.index();
+const D2: usize = Param::D2.index();
+const MU: usize = Param::Mu.index();
+const F0: usize = Param::F0.index();
+const K2: usize = Param::K2.index();
+
 /// The order in which [`prune`] gives up parameters that share a near-null direction:
 /// m, d0, d2, d1, then F0, mu, k2.
-const DROP_ORDER: [usize; 7] = [0, 1, 3, 2, 5, 4, 6];
+const DROP_ORDER: [usize; 7] = [M, D0, D2, D1, F0, MU, K2];
+
+/// The dynamic parameters whose information can be mostly noise, in the order they are given
+/// up: m, d2, d1.
+const NOISY_ORDER: [usize; 3] = [M, D2, D1];
 
 /// Smallest share of the information on m that must be signal rather than acceleration noise
 /// for m to count as identifiable.
@@ -84,11 +144,44 @@ pub struct Estimate {
     pub std: Option<f64>,
 }
 
+/// One estimate per parameter.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Estimates([Estimate; 7]);
+
+impl Estimates {
+    /// The estimate of `p`.
+    pub fn get(&self, p: Param) -> Estimate {
+        self.0[p.index()]
+    }
+
+    /// The value of `p`, when identifiable.
+    pub fn value(&self, p: Param) -> Option<f64> {
+        self.get(p).value
+    }
+
+    /// Each parameter with its estimate, in model order.
+    pub fn iter(&self) -> impl Iterator<Item = (Param, Estimate)> + '_ {
+        Param::ALL.into_iter().map(|p| (p, self.get(p)))
+    }
+}
+
+impl Serialize for Estimates {
+    /// A map from the unit-bearing key to `{value, std}`, in model order.
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeMap;
+        let mut map = s.serialize_map(Some(7))?;
+        for (p, e) in self.iter() {
+            map.serialize_entry(p.key(), &e)?;
+        }
+        map.end()
+    }
+}
+
 /// The result of [`identify`].
 #[derive(Debug, Clone, Serialize)]
 pub struct Identification {
-    /// Parameters by their unit-bearing names, in [`PARAMS`] order.
-    pub parameters: Vec<(String, Estimate)>,
+    /// Every parameter's estimate.
+    pub parameters: Estimates,
     /// Parameters this log cannot identify.
     pub not_identifiable: Vec<String>,
     /// k2 from the quasi-static stage alone (1/mm).
@@ -121,12 +214,9 @@ pub struct Identification {
 }
 
 impl Identification {
-    /// The estimate of a parameter by name.
-    pub fn get(&self, name: &str) -> Option<Estimate> {
-        self.parameters
-            .iter()
-            .find(|(n, _)| n == name)
-            .map(|(_, e)| *e)
+    /// The estimate of a parameter.
+    pub fn get(&self, p: Param) -> Estimate {
+        self.parameters.get(p)
     }
 }
 
@@ -221,21 +311,21 @@ type Active = [bool; 7];
 
 /// Model force and Jacobian row for parameters p = [m, d0, d1, d2, mu, F0, k2].
 fn model(p: &V7, r: &Rows, i: usize) -> (f64, V7) {
-    let e = (p[6] * r.x[i]).exp();
+    let e = (p[K2] * r.x[i]).exp();
     let xd3 = unbiased_cube(r.xd[i], r.var_xd);
-    let row = V7::from([r.xdd[i], r.sgn[i], r.xd[i], xd3, e, 1.0, p[4] * r.x[i] * e]);
-    let f = p[0] * r.xdd[i] + p[1] * r.sgn[i] + p[2] * r.xd[i] + p[3] * xd3 + p[4] * e + p[5];
+    let row = V7::from([r.xdd[i], r.sgn[i], r.xd[i], xd3, e, 1.0, p[MU] * r.x[i] * e]);
+    let f = p[M] * r.xdd[i] + p[D0] * r.sgn[i] + p[D1] * r.xd[i] + p[D2] * xd3 + p[MU] * e + p[F0];
     (f, row)
 }
 
 /// Effective variance of a row's force residual at parameters p.
 fn row_variance(p: &V7, r: &Rows, i: usize) -> f64 {
-    let stiffness = p[6] * p[4] * (p[6] * r.x[i]).exp();
-    let damping = p[2] + 3.0 * p[3] * r.xd[i] * r.xd[i];
+    let stiffness = p[K2] * p[MU] * (p[K2] * r.x[i]).exp();
+    let damping = p[D1] + 3.0 * p[D2] * r.xd[i] * r.xd[i];
     r.var_f
         + stiffness * stiffness * r.var_x
         + damping * damping * r.var_xd
-        + p[0] * p[0] * r.var_xdd
+        + p[M] * p[M] * r.var_xdd
 }
 
 fn weights_at(p: &V7, r: &Rows) -> Vec<f64> {
@@ -266,23 +356,23 @@ fn unbiased_cube(o: f64, s2: f64) -> f64 {
 /// powers of v are replaced by their unbiased estimates from o.
 fn row_correction(r: &Rows, i: usize, active: &Active) -> M7 {
     let mut c = M7::zeros();
-    if active[0] {
-        c[(0, 0)] = r.var_xdd;
+    if active[M] {
+        c[(M, M)] = r.var_xdd;
     }
     let s2 = r.var_xd;
     if s2 > 0.0 {
         let o2 = r.xd[i] * r.xd[i];
         let v2 = o2 - s2;
         let v4 = o2 * o2 - 6.0 * o2 * s2 + 3.0 * s2 * s2;
-        if active[2] {
-            c[(2, 2)] = s2;
+        if active[D1] {
+            c[(D1, D1)] = s2;
         }
-        if active[2] && active[3] {
-            c[(2, 3)] = 3.0 * v2 * s2;
-            c[(3, 2)] = c[(2, 3)];
+        if active[D1] && active[D2] {
+            c[(D1, D2)] = 3.0 * v2 * s2;
+            c[(D2, D1)] = c[(D1, D2)];
         }
-        if active[3] {
-            c[(3, 3)] = 9.0 * v4 * s2 + 18.0 * v2 * s2 * s2 + 6.0 * s2 * s2 * s2;
+        if active[D2] {
+            c[(D2, D2)] = 9.0 * v4 * s2 + 18.0 * v2 * s2 * s2 + 6.0 * s2 * s2 * s2;
         }
     }
     c
@@ -301,7 +391,7 @@ fn correction(r: &Rows, active: &Active, weights: &[f64]) -> M7 {
 /// left after removing the acceleration noise: 1 for noise-free accelerations, near or below
 /// zero when the log's accelerations are buried in the filtered position noise.
 fn inertia_signal_share(jtj_corrected: &M7, c: &M7, active: &Active) -> f64 {
-    if !active[0] {
+    if !active[M] {
         return 1.0;
     }
     let raw = inverse(&(jtj_corrected + c), active).map_or(0.0, |h| 1.0 / h[(0, 0)]);
@@ -325,10 +415,10 @@ fn prune_all(p: &mut V7, r: &Rows, active: &mut Active, weights: &[f64]) -> Vec<
     let c = correction(r, active, weights);
     let share = inertia_signal_share(&jtj, &c, active);
     if share < MIN_INERTIA_SIGNAL_SHARE {
-        active[0] = false;
-        removed.push(PARAMS[0].to_string());
+        active[M] = false;
+        removed.push(Param::M.key().to_string());
     }
-    for k in [0, 3, 2] {
+    for k in NOISY_ORDER {
         let (jtj, _, _) = normal(p, r, active, weights);
         if scaled(&jtj, active).cholesky().is_some() {
             break;
@@ -475,7 +565,7 @@ fn gauss_newton(
             // definiteness through a noise-corrected column: m, then d2, then d1.
             let mut dropped = prune(&(jtj + correction(r, active, &weights)), active);
             if dropped.is_empty() {
-                if let Some(k) = [0, 3, 2].into_iter().find(|&k| active[k]) {
+                if let Some(k) = NOISY_ORDER.into_iter().find(|&k| active[k]) {
                     active[k] = false;
                     dropped.push(PARAMS[k].to_string());
                 }
@@ -749,7 +839,7 @@ pub fn identify_with_window(
         .collect();
 
     // Stage 3: joint refinement with k2.
-    active[6] = true;
+    active[K2] = true;
     not_identifiable.extend(prune_all(&mut p, &rows, &mut active, &weights));
     let (p, dropped) = gauss_newton(p, &rows, &mut active, 100)?;
     not_identifiable.extend(dropped);
@@ -769,31 +859,26 @@ pub fn identify_with_window(
         .sum::<f64>()
         / m as f64)
         .sqrt();
-    let parameters = PARAMS
-        .iter()
-        .enumerate()
-        .map(|(k, name)| {
-            let e = if active[k] {
-                Estimate {
-                    value: Some(p[k]),
-                    std: Some(cov[(k, k)].sqrt()),
-                }
-            } else {
-                Estimate {
-                    value: None,
-                    std: None,
-                }
-            };
-            (name.to_string(), e)
-        })
-        .collect();
+    let parameters = Estimates(std::array::from_fn(|k| {
+        if active[k] {
+            Estimate {
+                value: Some(p[k]),
+                std: Some(cov[(k, k)].sqrt()),
+            }
+        } else {
+            Estimate {
+                value: None,
+                std: None,
+            }
+        }
+    }));
     let idx: Vec<usize> = (0..7).filter(|&k| active[k]).collect();
     not_identifiable.sort();
     not_identifiable.dedup();
     Ok(Identification {
         parameters,
         not_identifiable,
-        k2_quasi_static_per_mm: p1[6],
+        k2_quasi_static_per_mm: p1[K2],
         covariance: idx
             .iter()
             .map(|&a| idx.iter().map(|&b| cov[(a, b)]).collect())

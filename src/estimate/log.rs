@@ -84,23 +84,9 @@ pub fn parse_column(text: &str, dim: Dimension, what: &str) -> Result<Column, Lo
     })
 }
 
-/// Parses a time column option (units s, ms or us).
+/// Parses a time column option (units s, ms, us, min, h).
 pub fn parse_time_column(text: &str) -> Result<Column, LogError> {
-    let (name, unit) = split_column(text, "time")?;
-    let factor = match unit {
-        None | Some("s") => 1.0,
-        Some("ms") => 1e-3,
-        Some("us") => 1e-6,
-        Some(u) => {
-            return Err(LogError::Option(format!(
-                "--time {text}: unknown unit \"{u}\" (units: s, ms, us)"
-            )))
-        }
-    };
-    Ok(Column {
-        name: name.into(),
-        factor,
-    })
+    parse_column(text, Dimension::Time, "time")
 }
 
 /// Why a log was refused.

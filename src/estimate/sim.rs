@@ -1,4 +1,4 @@
-//! Simulated calibration runs with known truth (physics.md section 4).
+//! Simulated calibration runs with known truth (docs/THEORY.md section 4).
 //!
 //! A motor drives the deflection x(t) along a smooth profile; the rod force follows eq. (9):
 //! F = m*xdd + d1*xd + d2*xd^3 + d0*sgn(xd) + F_S(x), with the spec's designed law as F_S. The
@@ -12,7 +12,7 @@ use rand_distr::{Distribution, Normal};
 use serde::Serialize;
 
 use super::log::CalibrationLog;
-use crate::law::ExpLaw;
+use crate::model::ExpLaw;
 
 /// The motion profile.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -101,6 +101,21 @@ pub struct SimSettings {
     pub dynamics: Dynamics,
     /// Noise.
     pub noise: Noise,
+}
+
+impl Default for SimSettings {
+    /// What `camspring simulate` does by default: sines for 300 s at 100 Hz, seed 0, the
+    /// default transmission and the paper's sensor noise.
+    fn default() -> Self {
+        SimSettings {
+            profile: Profile::Sines,
+            duration_s: 300.0,
+            rate_hz: 100.0,
+            seed: 0,
+            dynamics: Dynamics::default(),
+            noise: Noise::default(),
+        }
+    }
 }
 
 /// The truth behind a simulated log.

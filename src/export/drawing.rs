@@ -12,7 +12,8 @@ use svg::node::element::{Circle, Group, Line, Path, Polyline, Rectangle, Text};
 use svg::Document;
 
 use crate::design::Design;
-use crate::part::{Part, Segment, P2};
+use crate::geom::P2;
+use crate::part::{Part, Segment};
 
 const MARGIN: f64 = 25.0;
 const TITLE_H: f64 = 45.0;
@@ -281,11 +282,11 @@ pub fn drawing_svg(design: &Design, part: &Part) -> String {
     let ty = height - TITLE_H - 5.0;
     let cam = &spec.part.cam_material;
     let targets = match &spec.law {
-        crate::spec::LawSpec::Targets(t) => format!(
+        crate::model::LawSpec::Targets(t) => format!(
             "spec: fmax {} N at xmax {} mm, fmin {} N at l0 {} mm, c0 {} at delta0 {} mm",
             t.fmax_n, t.xmax_mm, t.fmin_n, t.l0_mm, t.c0, t.delta0_mm
         ),
-        crate::spec::LawSpec::Given { .. } => "spec: law given directly (mu, k2, f0)".to_string(),
+        crate::model::LawSpec::Given { .. } => "spec: law given directly (mu, k2, f0)".to_string(),
     };
     let rows = [
         format!("camspring cam part: {}", spec.name),

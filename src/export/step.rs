@@ -13,7 +13,8 @@ use truck_modeling::{
 };
 use truck_stepio::out::{CompleteStepDisplay, StepHeaderDescriptor, StepModel};
 
-use crate::part::{Part, Segment, P2};
+use crate::geom::P2;
+use crate::part::{Part, Segment};
 
 /// Why the solid could not be built.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

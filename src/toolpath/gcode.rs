@@ -12,7 +12,7 @@ use std::fmt::Write as _;
 use super::path::Move;
 use super::{Pass, ToolpathSummary};
 use crate::design::Design;
-use crate::spec::{Coolant, Dialect};
+use crate::model::{Coolant, Dialect};
 
 /// Decimals written for coordinates in a dialect.
 pub fn decimals(d: Dialect) -> usize {

@@ -19,8 +19,9 @@ use serde::Serialize;
 
 use crate::cam::pitch_curve::CamError;
 use crate::design::Design;
+use crate::geom::{add, cross, dist, left, norm, right, scale, sub, P2};
 use crate::part::{exact_edge_point, Part, Segment};
-use path::{add, cross, dist, fit_curve, left, norm, right, scale, sub, Move, Path2, P2};
+use path::{fit_curve, Move, Path2};
 
 /// Why no tool path can be made.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

@@ -1,8 +1,8 @@
 //! Planar tool paths: lines and circular arcs, their geometry, and biarc fitting of smooth
 //! curves within a tolerance.
 
-/// A 2D point (mm).
-pub type P2 = [f64; 2];
+use crate::geom::P2;
+use crate::geom::{add, cross, dist, dot, left, scale, sub};
 
 /// One move of a planar path, from the previous end point.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -39,36 +39,6 @@ pub struct Path2 {
     pub start: P2,
     /// Moves.
     pub moves: Vec<Move>,
-}
-
-pub(crate) fn sub(a: P2, b: P2) -> P2 {
-    [a[0] - b[0], a[1] - b[1]]
-}
-pub(crate) fn add(a: P2, b: P2) -> P2 {
-    [a[0] + b[0], a[1] + b[1]]
-}
-pub(crate) fn scale(a: P2, k: f64) -> P2 {
-    [a[0] * k, a[1] * k]
-}
-pub(crate) fn dot(a: P2, b: P2) -> f64 {
-    a[0] * b[0] + a[1] * b[1]
-}
-pub(crate) fn cross(a: P2, b: P2) -> f64 {
-    a[0] * b[1] - a[1] * b[0]
-}
-pub(crate) fn norm(a: P2) -> f64 {
-    a[0].hypot(a[1])
-}
-pub(crate) fn dist(a: P2, b: P2) -> f64 {
-    norm(sub(a, b))
-}
-/// Left normal.
-pub(crate) fn left(t: P2) -> P2 {
-    [-t[1], t[0]]
-}
-/// Right normal.
-pub(crate) fn right(t: P2) -> P2 {
-    [t[1], -t[0]]
 }
 
 /// Signed sweep angle of an arc from `from` to `to` about `center` (positive counter-clockwise).
@@ -233,6 +203,7 @@ pub fn fit_curve<E>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geom::norm;
 
     #[test]
     fn biarc_of_a_circle_is_exact() {

@@ -1,11 +1,14 @@
 //! Shared helpers for the integration tests: the paper's law, follower builders, tolerances.
 #![allow(dead_code)]
 
-use camspring::cam::follower::{Follower, FrictionCorrection, FrictionSource, SpringArrangement};
 use camspring::cam::pitch_curve::SynthesisOptions;
-use camspring::law::{solve, ExpLaw, LawTargets};
+use camspring::model::{Follower, FrictionCorrection, FrictionSource, SpringArrangement};
+use camspring::{
+    law::solve,
+    model::{ExpLaw, LawTargets},
+};
 
-/// The paper's targets (physics.md section 1).
+/// The paper's targets (docs/THEORY.md section 1).
 pub fn paper_targets() -> LawTargets {
     LawTargets {
         fmax_n: 200.0,

@@ -18,10 +18,10 @@ use serde::Serialize;
 
 use crate::cam::pitch_curve::{CamError, PitchCurve, PitchSample};
 use crate::design::Design;
-use crate::spec::Hole;
+use crate::geom::{dist, P2};
+use crate::model::Hole;
 
-/// A 2D point (mm).
-pub type P2 = [f64; 2];
+pub mod mesh;
 
 /// Smallest wall left between a hole and the outline or another hole.
 pub const MIN_LIGAMENT_MM: f64 = 1.0;
@@ -266,10 +266,6 @@ pub fn exact_edge_point(
     s_mm: f64,
 ) -> Result<EdgePoint, CamError> {
     Ok(edge_point(&pitch.exact_at_arc(s_mm)?, r, frame, mirrored))
-}
-
-fn dist(a: P2, b: P2) -> f64 {
-    (a[0] - b[0]).hypot(a[1] - b[1])
 }
 
 /// Keeps as few of the exact points as possible such that each Hermite span between kept

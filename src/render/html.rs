@@ -7,8 +7,8 @@ use std::fmt::Write as _;
 use serde_json::Value;
 
 use super::plot::{self, Panel, Series};
-use super::DesignSummary;
 use crate::design::Design;
+use crate::outputs::DesignSummary;
 
 const STYLE: &str = "body{font-family:system-ui,-apple-system,Segoe UI,Helvetica,Arial,sans-serif;\
 max-width:1280px;margin:2em auto;padding:0 1em;color:#222;line-height:1.4}\
@@ -200,7 +200,7 @@ pub fn report_html(
     h.push_str(
         "<p>Note on the paper's printed values: the paper prints alpha = 1.3288, which is not a \
          root of its eq. (5) (the residual there is about -3.9); the law above is the exact root \
-         for this spec, derived in <code>shared/notes/physics.md</code> and checked by the \
+         for this spec, derived in <code>docs/THEORY.md</code> and checked by the \
          test suite.</p>\n",
     );
 
@@ -284,7 +284,7 @@ pub fn report_html(
 
 /// `validation.html`: the verdict, the criteria and the plots of `validation.svg`.
 pub fn validation_html(
-    v: &crate::estimate::validate::Validation,
+    v: &crate::verdict::validate::Validation,
     validation_svg: &str,
     log_name: &str,
 ) -> String {

@@ -1,14 +1,17 @@
-//! The commands behind the CLI, as library functions: load a spec, run a design, write its
-//! outputs and format what the user reads. `main.rs` only parses arguments and prints.
+//! The commands as library functions: file I/O, progress bars and exit codes around the pure
+//! layers below. Load a spec, design it, plan and write its outputs; read a log and run the
+//! calibration chain. The binary only parses arguments and prints.
 
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use crate::cam::checks::Status;
-use crate::design::design;
+use crate::design::{design, law_of};
 use crate::error::{Error, Result};
-use crate::export::{write_design, DesignSummary};
-use crate::spec::{Spec, DEFAULT_SPEC_TOML};
+use crate::estimate::pipeline::{estimate, EstimateOptions, EstimateRun, StateName};
+use crate::export::{write_atomic, write_design, ExportError};
+use crate::model::{ExpLaw, Spec};
+use crate::outputs::{plan, DesignSummary};
+use crate::spec::DEFAULT_SPEC_TOML;
 
 /// Exit code: design done, all checks pass or warn.
 pub const EXIT_OK: u8 = 0;
@@ -65,124 +68,16 @@ impl DesignRun {
 pub fn run_design(spec_path: Option<&Path>, out_dir: Option<&Path>) -> Result<DesignRun> {
     let spec = load_spec(spec_path)?;
     let design = design(&spec)?;
+    let outputs = plan(&design)?;
     let out_dir = out_dir
         .map(Path::to_path_buf)
         .unwrap_or_else(|| Path::new("out").join(&spec.name));
-    let (summary, written) = write_design(&design, &out_dir)?;
+    let written = write_design(&design, &outputs, &out_dir)?;
     Ok(DesignRun {
-        summary,
+        summary: outputs.summary,
         out_dir,
         written,
     })
-}
-
-/// The human-readable report of a design run.
-pub fn format_design(run: &DesignRun) -> String {
-    let s = &run.summary;
-    let mut o = String::new();
-    let _ = writeln!(o, "camspring design '{}'", s.name);
-    let l = &s.law;
-    match l.alpha {
-        Some(a) => {
-            let _ = writeln!(
-                o,
-                "  law      F = {:.7} N * exp({:.7} /mm * x) + {:.7} N   (alpha = {:.10})",
-                l.mu_n, l.k2_per_mm, l.f0_n, a
-            );
-        }
-        None => {
-            let _ = writeln!(
-                o,
-                "  law      F = {:.7} N * exp({:.7} /mm * x) + {:.7} N   (given)",
-                l.mu_n, l.k2_per_mm, l.f0_n
-            );
-        }
-    }
-    if let Some(r) = &l.residuals {
-        let _ = writeln!(
-            o,
-            "           residuals: F(L0) {:.1e}, F(Xmax) {:.1e}, C0 {:.1e} (relative)",
-            r.force_at_l0, r.force_at_xmax, r.c0
-        );
-    }
-    let f = &s.follower;
-    let _ = writeln!(
-        o,
-        "  follower {} x roller r = {:.4} mm, springs {:.4} N/mm ({}), k_eff = {:.4} N/mm, preload {:.4} mm, friction {:.4} ({} correction)",
-        f.count, f.roller_radius_mm, f.spring_rate_n_per_mm, f.spring, f.k_eff_n_per_mm, f.preload_mm, f.friction_coefficient, f.friction_correction
-    );
-    let p = &s.profile;
-    let _ = writeln!(
-        o,
-        "  profile  lift {:.4} mm over {} mm, max pressure angle {:.2} deg at x = {:.3} mm, {} samples",
-        p.lift_mm, p.xmax_mm, p.max_pressure_angle_deg, p.max_pressure_angle_at_x_mm, p.samples
-    );
-    let _ = writeln!(
-        o,
-        "  force    at Xmax: loading {} N, unloading {:.3} N",
-        p.loading_force_at_xmax_n
-            .map_or("jammed".to_string(), |v| format!("{v:.3}")),
-        p.unloading_force_at_xmax_n
-    );
-    match (&s.part, &s.part_refused) {
-        (Some(part), _) => {
-            let _ = writeln!(
-                o,
-                "  part     area {:.4} mm2 x {:.3} mm = {:.3} mm3, box {:.3} x {:.3} mm, cam B-spline {} spans within {:.1e} mm, STL {} triangles",
-                part.area_mm2,
-                part.thickness_mm,
-                part.volume_mm3,
-                part.bounding_box_max_mm[0] - part.bounding_box_min_mm[0],
-                part.bounding_box_max_mm[1] - part.bounding_box_min_mm[1],
-                part.cam_edge_spans.iter().sum::<usize>(),
-                part.cam_edge_fit_deviation_mm,
-                part.stl_triangles
-            );
-        }
-        (None, Some(why)) => {
-            let _ = writeln!(o, "  part     REFUSED: {why}");
-        }
-        (None, None) => {}
-    }
-    match (&s.gcode, &s.gcode_refused) {
-        (Some(g), _) => {
-            let _ = writeln!(
-                o,
-                "  gcode    {} blocks ({:?}, {}), {} rough levels of {:.3} mm + finish, fit within {:.1e} mm (budget {:.1e}), about {:.1} min",
-                g.blocks,
-                g.dialect,
-                if g.arcs { "arcs" } else { "lines only" },
-                g.toolpath.rough_levels,
-                g.toolpath.depth_step_mm,
-                g.toolpath.max_fit_deviation_mm,
-                g.toolpath.fit_budget_mm,
-                g.toolpath.estimated_minutes
-            );
-        }
-        (None, Some(why)) => {
-            let _ = writeln!(o, "  gcode    REFUSED: {why}");
-        }
-        (None, None) => {}
-    }
-    let _ = writeln!(o, "  checks");
-    for c in &s.checks {
-        let _ = writeln!(
-            o,
-            "    {:<5} {:<15} {}",
-            c.status.as_str().to_uppercase(),
-            c.name,
-            c.message
-        );
-        if let Some(a) = &c.advice {
-            let _ = writeln!(o, "          advice: {a}");
-        }
-    }
-    let _ = writeln!(o, "  status   {}", s.status.as_str().to_uppercase());
-    let _ = writeln!(o, "  wrote");
-    for w in &run.written {
-        let _ = writeln!(o, "    {}", w.display());
-    }
-    o
 }
 
 /// Options of `camspring simulate`.
@@ -206,16 +101,19 @@ pub struct SimulateRun {
     /// Samples written.
     pub samples: usize,
     /// The spring law simulated.
-    pub law: crate::law::ExpLaw,
+    pub law: ExpLaw,
+}
+
+/// The law a spec designs: solved from its targets, or given.
+pub fn designed_law(spec: &Spec) -> Result<ExpLaw> {
+    Ok(law_of(spec).map_err(|e| Error::Design(e.into()))?.law)
 }
 
 /// Runs `camspring simulate`: a calibration log of the spec's designed spring with known truth.
 pub fn run_simulate(spec_path: Option<&Path>, opts: &SimulateOptions) -> Result<SimulateRun> {
     use crate::estimate::{log::write_log, sim::simulate};
     let spec = load_spec(spec_path)?;
-    let law = crate::design::law_of(&spec)
-        .map_err(|e| Error::Design(e.into()))?
-        .law;
+    let law = designed_law(&spec)?;
     let xmax = spec.law.xmax_mm();
     let (log, truth) = simulate(&law, xmax, law.force_n(xmax), &opts.settings)?;
     let log_path = opts
@@ -226,12 +124,12 @@ pub fn run_simulate(spec_path: Option<&Path>, opts: &SimulateOptions) -> Result<
         .truth_path
         .clone()
         .unwrap_or_else(|| log_path.with_extension("truth.json"));
-    let truth_json = serde_json::to_vec(&truth).map_err(|e| Error::Encode {
+    let truth_json = serde_json::to_vec(&truth).map_err(|e| ExportError::Encode {
         what: "truth.json",
         message: e.to_string(),
     })?;
-    crate::export::write_atomic(&log_path, &write_log(&log))?;
-    crate::export::write_atomic(&truth_path, &truth_json)?;
+    write_atomic(&log_path, &write_log(&log))?;
+    write_atomic(&truth_path, &truth_json)?;
     Ok(SimulateRun {
         log_path,
         truth_path,
@@ -242,7 +140,7 @@ pub fn run_simulate(spec_path: Option<&Path>, opts: &SimulateOptions) -> Result<
 
 /// A progress bar on stderr for `len` units, only on a terminal, never when `CI` is set, and
 /// only for work of more than `threshold` units.
-fn progress_bar(len: u64, threshold: u64, template: &str) -> Option<indicatif::ProgressBar> {
+pub fn progress_bar(len: u64, threshold: u64, template: &str) -> Option<indicatif::ProgressBar> {
     use std::io::IsTerminal;
     let show =
         std::io::stderr().is_terminal() && std::env::var_os("CI").is_none() && len > threshold;
@@ -304,7 +202,7 @@ pub fn read_log_file(
 #[derive(Debug, Clone)]
 pub struct NoiseRun {
     /// The noise model.
-    pub model: crate::estimate::report::NoiseModel,
+    pub model: crate::estimate::noise::NoiseModel,
     /// The Allan plot written.
     pub svg_path: PathBuf,
 }
@@ -316,7 +214,8 @@ pub fn run_noise(
     sampling_tolerance: f64,
     svg_path: Option<&Path>,
 ) -> Result<NoiseRun> {
-    use crate::estimate::report::{allan_svg, noise_model};
+    use crate::estimate::noise::noise_model;
+    use crate::render::calibration::allan_svg;
     let log = read_log_file(log_path, map, sampling_tolerance, true)?;
     let model = noise_model(&log);
     let svg_path = svg_path.map(Path::to_path_buf).unwrap_or_else(|| {
@@ -325,7 +224,7 @@ pub fn run_noise(
             .unwrap_or(Path::new("."))
             .join("allan.svg")
     });
-    crate::export::write_atomic(&svg_path, allan_svg(&model).as_bytes())?;
+    write_atomic(&svg_path, allan_svg(&model).as_bytes())?;
     Ok(NoiseRun { model, svg_path })
 }
 
@@ -373,142 +272,55 @@ pub fn run_identify(
 
 /// Where `camspring estimate` takes the filter's initial state from.
 #[derive(Debug, Clone)]
-pub enum EstimateInit {
+pub enum InitSource {
     /// Offline identification of the same log (the paper's procedure; default).
     Identify,
-    /// A spec's designed law (k2, mu, F0); the dynamics start wide.
+    /// A spec file's designed law.
     Spec(PathBuf),
 }
 
-/// Options of `camspring estimate`.
-#[derive(Debug, Clone)]
-pub struct EstimateOptions {
-    /// Initial state.
-    pub init: EstimateInit,
-    /// Prediction method.
-    pub discretization: crate::estimate::ekf::Discretization,
-    /// Force-rate input.
-    pub force_rate: crate::estimate::ekf::ForceRate,
-    /// Sensor noise (R and the force-rate noise).
-    pub noise: crate::estimate::identify::SensorNoise,
-    /// Identification window (s), when identifying.
-    pub window_s: Option<f64>,
-    /// Innovations beyond this many standard deviations count as outliers; 50 in a row stop
-    /// the filter (None: 8).
-    pub outlier_sigmas: Option<f64>,
-    /// Overrides of the process noise density Q of states (index, value).
-    pub q: Vec<(usize, f64)>,
-    /// Overrides of the initial standard deviation of states (index, value).
-    pub p0_std: Vec<(usize, f64)>,
-    /// Override of the position measurement variance R (mm^2).
-    pub r_position_mm2: Option<f64>,
+/// Resolves the init source into the pipeline's options (a spec is read and its law solved).
+pub fn with_init(mut opts: EstimateOptions, init: &InitSource) -> Result<EstimateOptions> {
+    if let InitSource::Spec(path) = init {
+        let spec = load_spec(Some(path))?;
+        opts.init = crate::estimate::pipeline::EstimateInit::Law {
+            law: designed_law(&spec)?,
+            xmax_mm: spec.law.xmax_mm(),
+        };
+    }
+    Ok(opts)
 }
 
 /// Parses a `STATE=VALUE` override; STATE is a short name (x, xd, xdd, sigma, d, m, k2, d2)
 /// or the unit-bearing one of [`crate::estimate::ekf::STATE_NAMES`].
-pub fn parse_state_override(text: &str, option: &str) -> Result<(usize, f64)> {
-    use crate::estimate::ekf::STATE_NAMES;
-    const SHORT: [&str; 8] = ["x", "xd", "xdd", "sigma", "d", "m", "k2", "d2"];
+pub fn parse_state_override(text: &str, option: &str) -> Result<(StateName, f64)> {
     let bad = |why: String| Error::Argument(format!("{option} {text}: {why}"));
     let (name, value) = text
         .split_once('=')
         .ok_or_else(|| bad("expected STATE=VALUE, for example xdd=0.5".into()))?;
-    let name = name.trim();
-    let k = SHORT
-        .iter()
-        .position(|s| s.eq_ignore_ascii_case(name))
-        .or_else(|| STATE_NAMES.iter().position(|s| *s == name))
-        .ok_or_else(|| {
-            bad(format!(
-                "unknown state \"{name}\" (states: {})",
-                SHORT.join(", ")
-            ))
-        })?;
+    let state = StateName::parse(name).ok_or_else(|| {
+        let names: Vec<&str> = StateName::ALL.iter().map(|s| s.short()).collect();
+        bad(format!(
+            "unknown state \"{}\" (states: {})",
+            name.trim(),
+            names.join(", ")
+        ))
+    })?;
     let v: f64 = value
         .trim()
         .parse()
         .ok()
         .filter(|v: &f64| v.is_finite() && *v >= 0.0)
         .ok_or_else(|| bad(format!("\"{}\" is not a number >= 0", value.trim())))?;
-    Ok((k, v))
+    Ok((state, v))
 }
 
-/// What `camspring estimate` computed.
-#[derive(Debug, Clone)]
-pub struct EstimateRun {
-    /// The filter run.
-    pub run: crate::estimate::ekf::EkfRun,
-    /// The settings used.
-    pub settings: crate::estimate::ekf::EkfSettings,
-    /// The identification, when the init came from it.
-    pub identification: Option<crate::estimate::identify::Identification>,
-}
-
-/// Runs the EKF over a log already read.
+/// Runs the EKF over a log already read, with a progress bar when `progress` is set.
 pub fn estimate_log(
     log: &crate::estimate::log::CalibrationLog,
     opts: &EstimateOptions,
     progress: bool,
 ) -> Result<EstimateRun> {
-    use crate::estimate::ekf::{self, EkfInit};
-    use crate::estimate::identify::identify_with_window;
-    use crate::estimate::sg;
-    let (init, identification, stroke) = match &opts.init {
-        EstimateInit::Identify => {
-            let id = identify_with_window(log, &opts.noise, opts.window_s)?;
-            let stroke = log.position_mm.iter().fold(0.0_f64, |m, &x| m.max(x.abs()));
-            (EkfInit::from_identification(&id), Some(id), stroke)
-        }
-        EstimateInit::Spec(path) => {
-            let spec = load_spec(Some(path))?;
-            let law = crate::design::law_of(&spec)
-                .map_err(|e| Error::Design(e.into()))?
-                .law;
-            (EkfInit::from_law(&law), None, spec.law.xmax_mm())
-        }
-    };
-    let dt = log.dt_s();
-    let mut settings =
-        ekf::default_settings(&init, &opts.noise, dt, opts.discretization, opts.force_rate);
-    // Coulomb friction steps the force at every reversal; its derivative is not in the
-    // filter's model. Take the initial d0 out of the force first (sign of the motion velocity).
-    let mut force = log.force_n.clone();
-    if init.d0_n != 0.0 {
-        let diff = sg::Differentiator::for_rate(1.0 / dt);
-        let v = diff.apply(&log.position_mm, dt, sg::MOTION_VELOCITY);
-        let band = 3.0
-            * diff
-                .noise_variance(sg::MOTION_VELOCITY, opts.noise.position_variance_mm2, dt)
-                .sqrt();
-        let mut sign = 0.0;
-        for (i, f) in force.iter_mut().enumerate() {
-            let vi = v.get(i.saturating_sub(diff.half).min(v.len().saturating_sub(1)));
-            if let Some(&vi) = vi {
-                if vi > band {
-                    sign = 1.0;
-                } else if vi < -band {
-                    sign = -1.0;
-                }
-            }
-            *f -= init.d0_n * sign;
-        }
-    }
-    let first = ekf::force_rate_first_sample(dt, opts.force_rate);
-    let x0 = log.position_mm.get(first).copied().unwrap_or(0.0);
-    let (z0, sigma_std) = ekf::initial_state(&init, x0, stroke);
-    settings.p0_std[ekf::idx::SIGMA] = sigma_std;
-    if let Some(k) = opts.outlier_sigmas {
-        settings.outlier_sigmas = k;
-    }
-    for &(k, v) in &opts.q {
-        settings.q[k] = v;
-    }
-    for &(k, v) in &opts.p0_std {
-        settings.p0_std[k] = v;
-    }
-    if let Some(r) = opts.r_position_mm2 {
-        settings.r_position_mm2 = r.max(1e-12);
-    }
     let bar = progress
         .then(|| {
             progress_bar(
@@ -518,35 +330,15 @@ pub fn estimate_log(
             )
         })
         .flatten();
-    let run = ekf::run(
-        &log.t_s,
-        &force,
-        &log.position_mm,
-        opts.force_rate,
-        z0,
-        settings,
-        [init.f0_n, init.d0_n],
-        30.0,
-        |k, _| {
-            if let Some(b) = &bar {
-                b.set_position(k as u64);
-            }
-        },
-    );
+    let run = estimate(log, opts, |k, _| {
+        if let Some(b) = &bar {
+            b.set_position(k as u64);
+        }
+    });
     if let Some(b) = bar {
         b.finish_and_clear();
     }
-    let mut run = run.map_err(Error::Estimate)?;
-    // The parallel filter saw the force with the initial d0 taken out: add it back.
-    for o in run.offsets.iter_mut() {
-        o[1] += init.d0_n;
-    }
-    run.offset_filter.theta[1] += init.d0_n;
-    Ok(EstimateRun {
-        run,
-        settings,
-        identification,
-    })
+    Ok(run?)
 }
 
 /// Runs `camspring estimate`: reads the log, runs the EKF and writes the time series CSV
@@ -563,7 +355,7 @@ pub fn run_estimate(
     let out = out
         .map(Path::to_path_buf)
         .unwrap_or_else(|| log_path.with_extension("est.csv"));
-    crate::export::write_atomic(&out, &crate::estimate::report::estimate_csv(&est.run))?;
+    write_atomic(&out, &crate::render::calibration::estimate_csv(&est.run))?;
     Ok((est, out))
 }
 
@@ -577,12 +369,11 @@ pub fn run_validate(
     opts: &EstimateOptions,
     tolerance: f64,
     svg: Option<&Path>,
-) -> Result<(crate::estimate::validate::Validation, PathBuf)> {
-    use crate::estimate::validate::{validate, validation_svg};
+) -> Result<(crate::verdict::validate::Validation, PathBuf)> {
+    use crate::render::calibration::validation_svg;
+    use crate::verdict::validate::validate;
     let spec = load_spec(spec_path)?;
-    let designed = crate::design::law_of(&spec)
-        .map_err(|e| Error::Design(e.into()))?
-        .law;
+    let designed = designed_law(&spec)?;
     let log = read_log_file(log_path, map, sampling_tolerance, true)?;
     let est = estimate_log(&log, opts, true)?;
     let id = est
@@ -597,15 +388,15 @@ pub fn run_validate(
             .join("validation.svg")
     });
     let svg_text = validation_svg(&v, &est.run);
-    let html = crate::export::html::validation_html(
+    let html = crate::render::html::validation_html(
         &v,
         &svg_text,
         &log_path
             .file_name()
             .map_or(String::new(), |n| n.to_string_lossy().into_owned()),
     );
-    crate::export::write_atomic(&svg_path, svg_text.as_bytes())?;
-    crate::export::write_atomic(&svg_path.with_file_name("validation.html"), html.as_bytes())?;
+    write_atomic(&svg_path, svg_text.as_bytes())?;
+    write_atomic(&svg_path.with_file_name("validation.html"), html.as_bytes())?;
     Ok((v, svg_path))
 }
 
@@ -625,7 +416,8 @@ pub fn run_sweep(
     axes: &[crate::sweep::Axis],
     out_dir: Option<&Path>,
 ) -> Result<SweepRun> {
-    use crate::sweep::{sweep, sweep_csv, sweep_svg};
+    use crate::render::sweep::{sweep_csv, sweep_svg};
+    use crate::sweep::sweep;
     if axes.is_empty() || axes.len() > 3 {
         return Err(Error::Argument(format!(
             "sweep: {} --vary axes given; expected 1 to 3",
@@ -633,6 +425,7 @@ pub fn run_sweep(
         )));
     }
     let spec = load_spec(spec_path)?;
+    crate::sweep::check_axes(&spec, axes).map_err(Error::Argument)?;
     let total: usize = axes.iter().map(|a| a.values.len()).product();
     let bar = progress_bar(
         total as u64,
@@ -652,8 +445,8 @@ pub fn run_sweep(
         .unwrap_or_else(|| Path::new("out").join(&spec.name).join("sweep"));
     let csv = dir.join("sweep.csv");
     let svg = dir.join("sweep.svg");
-    crate::export::write_atomic(&csv, &sweep_csv(axes, &points))?;
-    crate::export::write_atomic(&svg, sweep_svg(axes, &points).as_bytes())?;
+    write_atomic(&csv, &sweep_csv(axes, &points))?;
+    write_atomic(&svg, sweep_svg(axes, &points).as_bytes())?;
     Ok(SweepRun {
         points,
         written: vec![csv, svg],

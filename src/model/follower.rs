@@ -1,7 +1,7 @@
 //! The roller followers: how many, how they are sprung, preload, roller radius and friction.
 //!
 //! Everything the pitch curve needs from the followers reduces to the effective rate `k_eff`
-//! in dU/dY = k_eff*(Y + Yp) (physics.md section 2), the preload Yp, and the contact friction
+//! in dU/dY = k_eff*(Y + Yp) (docs/THEORY.md, "Virtual work"), the preload Yp, and the contact friction
 //! coefficient with the chosen friction correction.
 
 use serde::Serialize;
@@ -93,6 +93,55 @@ pub struct Follower {
 }
 
 impl Follower {
+    /// One follower with its own spring of rate `spring_rate_n_per_mm` and a roller of radius
+    /// `roller_radius_mm`: no preload, no friction, loading correction. Change the rest with
+    /// the `with_*` methods.
+    pub fn new(spring_rate_n_per_mm: f64, roller_radius_mm: f64) -> Follower {
+        Follower {
+            count: 1,
+            arrangement: SpringArrangement::PerFollower,
+            spring_rate_n_per_mm,
+            preload_mm: 0.0,
+            roller_radius_mm,
+            friction: FrictionSource::Coefficient { coefficient: 0.0 },
+            friction_correction: FrictionCorrection::Loading,
+        }
+    }
+
+    /// A copy with `count` followers on opposed cam surfaces (1 or 2).
+    pub fn with_count(&self, count: u8) -> Follower {
+        Follower { count, ..*self }
+    }
+
+    /// A copy with another spring arrangement.
+    pub fn with_arrangement(&self, arrangement: SpringArrangement) -> Follower {
+        Follower {
+            arrangement,
+            ..*self
+        }
+    }
+
+    /// A copy with another roller radius.
+    pub fn with_roller_radius(&self, roller_radius_mm: f64) -> Follower {
+        Follower {
+            roller_radius_mm,
+            ..*self
+        }
+    }
+
+    /// A copy with another contact friction.
+    pub fn with_friction(&self, friction: FrictionSource) -> Follower {
+        Follower { friction, ..*self }
+    }
+
+    /// A copy corrected for another stroke.
+    pub fn with_friction_correction(&self, friction_correction: FrictionCorrection) -> Follower {
+        Follower {
+            friction_correction,
+            ..*self
+        }
+    }
+
     /// k_eff in dU/dY = k_eff*(Y + Yp).
     pub fn k_eff_n_per_mm(&self) -> f64 {
         match self.arrangement {
@@ -156,15 +205,9 @@ mod tests {
     use super::*;
 
     fn follower(count: u8, arrangement: SpringArrangement) -> Follower {
-        Follower {
-            count,
-            arrangement,
-            spring_rate_n_per_mm: 5.0,
-            preload_mm: 0.0,
-            roller_radius_mm: 3.0,
-            friction: FrictionSource::Coefficient { coefficient: 0.0 },
-            friction_correction: FrictionCorrection::Loading,
-        }
+        Follower::new(5.0, 3.0)
+            .with_count(count)
+            .with_arrangement(arrangement)
     }
 
     #[test]

@@ -1,96 +1,16 @@
 //! What the calibration commands print and write: JSON with unit-bearing keys, the text
-//! summary and the Allan variance plot.
+//! summaries, the EKF time series CSV, and the Allan variance and validation plots.
 
 use std::fmt::Write as _;
 
 use serde_json::{json, Map, Value};
 
-use super::allan::{allan_variance, white_noise_fit, AllanPoint, WhiteNoiseFit};
-use super::identify::{Identification, SensorNoise, PARAMS};
-use super::log::CalibrationLog;
-use super::sg::Differentiator;
-use crate::export::plot::{self, Panel, Series};
-
-/// One channel's noise model.
-#[derive(Debug, Clone)]
-pub struct ChannelNoise {
-    /// Channel name (force, position, force_rate).
-    pub name: &'static str,
-    /// Unit of the signal (N, mm, N/s).
-    pub unit: &'static str,
-    /// Unit suffix for JSON keys (n, mm, n_per_s).
-    pub key_unit: &'static str,
-    /// Allan curve.
-    pub allan: Vec<AllanPoint>,
-    /// White-noise fit over the first decade.
-    pub fit: WhiteNoiseFit,
-    /// Sample variance of the channel about its mean.
-    pub sample_variance: f64,
-}
-
-/// Noise models of a log recorded at rest.
-#[derive(Debug, Clone)]
-pub struct NoiseModel {
-    /// Force, position and force rate.
-    pub channels: [ChannelNoise; 3],
-    /// The force-rate variance the filter predicts from the force's white noise.
-    pub force_rate_predicted_variance: f64,
-    /// Sampling interval.
-    pub dt_s: f64,
-    /// The differentiator window (samples).
-    pub window: usize,
-}
-
-impl NoiseModel {
-    /// The sensor noise for identification: the white-noise variances of force and position.
-    pub fn sensor_noise(&self) -> SensorNoise {
-        SensorNoise {
-            force_variance_n2: self.channels[0].fit.variance,
-            position_variance_mm2: self.channels[1].fit.variance,
-        }
-    }
-}
-
-fn channel(
-    name: &'static str,
-    unit: &'static str,
-    key_unit: &'static str,
-    y: &[f64],
-    dt: f64,
-) -> ChannelNoise {
-    let allan = allan_variance(y, dt);
-    let fit = white_noise_fit(&allan, dt);
-    let mean = y.iter().sum::<f64>() / y.len() as f64;
-    let sample_variance =
-        y.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (y.len() as f64 - 1.0).max(1.0);
-    ChannelNoise {
-        name,
-        unit,
-        key_unit,
-        allan,
-        fit,
-        sample_variance,
-    }
-}
-
-/// Allan variance of force, position and the filtered force rate of a log at rest.
-pub fn noise_model(log: &CalibrationLog) -> NoiseModel {
-    let dt = log.dt_s();
-    let diff = Differentiator::for_rate(1.0 / dt);
-    let force_rate = diff.apply(&log.force_n, dt, super::sg::RATE);
-    let force = channel("force", "N", "n", &log.force_n, dt);
-    let predicted = diff.noise_variance(super::sg::RATE, force.fit.variance, dt);
-    NoiseModel {
-        channels: [
-            force,
-            channel("position", "mm", "mm", &log.position_mm, dt),
-            channel("force_rate", "N/s", "n_per_s", &force_rate, dt),
-        ],
-        force_rate_predicted_variance: predicted,
-        dt_s: dt,
-        window: diff.window(),
-    }
-}
+use super::plot::{self, Panel, Series};
+use crate::estimate::ekf::{idx, EkfRun, EkfSettings, STATE_NAMES};
+use crate::estimate::identify::{Identification, Param, SensorNoise};
+use crate::estimate::log::CalibrationLog;
+use crate::estimate::noise::NoiseModel;
+use crate::verdict::validate::{spring_force_n, Validation};
 
 /// `camspring noise --json`.
 pub fn noise_json(model: &NoiseModel) -> Value {
@@ -227,10 +147,10 @@ pub fn identification_json(
     log: &CalibrationLog,
 ) -> Value {
     let mut params = Map::new();
-    for name in PARAMS {
-        let e = id.get(name);
-        params.insert(name.into(), json!(e.and_then(|e| e.value)));
-        params.insert(format!("{name}_std"), json!(e.and_then(|e| e.std)));
+    for (p, e) in id.parameters.iter() {
+        let name = p.key();
+        params.insert(name.into(), json!(e.value));
+        params.insert(format!("{name}_std"), json!(e.std));
     }
     json!({
         "parameters": params,
@@ -271,13 +191,14 @@ pub fn format_identification(id: &Identification) -> String {
         "Identified from {} samples ({} moving, {} quasi-static; Savitzky-Golay window {} samples = {:.3} s)",
         id.samples, id.dynamic_samples, id.quasi_static_samples, id.sg_window, id.sg_window_s
     );
-    for (k, (sym, unit)) in units.iter().enumerate() {
-        match id.get(PARAMS[k]) {
-            Some(super::identify::Estimate {
+    for ((p, e), (sym, unit)) in id.parameters.iter().zip(units.iter()) {
+        match e {
+            crate::estimate::identify::Estimate {
                 value: Some(v),
                 std: Some(sd),
-            }) => {
-                let note = if sd > v.abs() && k != 1 {
+            } => {
+                // d0 (a friction step) may be small against its std without harm.
+                let note = if sd > v.abs() && p != Param::D0 {
                     "  (std exceeds the value: poorly resolved by this log)"
                 } else {
                     ""
@@ -311,8 +232,7 @@ pub fn format_identification(id: &Identification) -> String {
 
 /// The EKF time series as CSV: `t_s`, each state and its 1-sigma bound, then F0 and d0 from
 /// the parallel filter.
-pub fn estimate_csv(run: &super::ekf::EkfRun) -> Vec<u8> {
-    use super::ekf::STATE_NAMES;
+pub fn estimate_csv(run: &EkfRun) -> Vec<u8> {
     let mut out = String::with_capacity(run.states.len() * 260 + 512);
     out.push_str("t_s");
     for name in STATE_NAMES {
@@ -336,8 +256,7 @@ pub fn estimate_csv(run: &super::ekf::EkfRun) -> Vec<u8> {
 /// The final estimates (the paper's Table II) under the unit-bearing keys of `identify`,
 /// each with `_std`: k2_per_mm, m_n_s2_per_mm, d2_n_s3_per_mm3, sigma_n_per_mm (at the last
 /// sample), d_n_s_per_mm (at the last sample), f0_n and d0_n (parallel filter).
-pub fn estimate_json(run: &super::ekf::EkfRun, settings: &super::ekf::EkfSettings) -> Value {
-    use super::ekf::idx;
+pub fn estimate_json(run: &EkfRun, settings: &EkfSettings) -> Value {
     let z = run.last.z;
     let sd = run.last.std();
     let f = run.offset_filter.theta;
@@ -361,8 +280,7 @@ pub fn estimate_json(run: &super::ekf::EkfRun, settings: &super::ekf::EkfSetting
 }
 
 /// The text summary of `camspring estimate`.
-pub fn format_estimate(run: &super::ekf::EkfRun) -> String {
-    use super::ekf::idx;
+pub fn format_estimate(run: &EkfRun) -> String {
     let z = run.last.z;
     let sd = run.last.std();
     let f = run.offset_filter.theta;
@@ -401,4 +319,141 @@ pub fn format_estimate(run: &super::ekf::EkfRun) -> String {
         );
     }
     s
+}
+
+/// The text verdict.
+pub fn format_validation(v: &Validation) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "{}  against F = {:.6} N * exp({:.6} /mm * x) + {:.6} N over x = {:.3} ... {:.3} mm",
+        if v.pass { "PASS" } else { "FAIL" },
+        v.designed.mu_n,
+        v.designed.k2_per_mm,
+        v.designed.f0_n,
+        v.range_min_mm,
+        v.range_max_mm
+    );
+    for c in &v.criteria {
+        let _ = writeln!(
+            s,
+            "  {}  {:<22} {:>8.3} % (tolerance {:.3} %)  {}",
+            if c.pass { "PASS" } else { "FAIL" },
+            c.name,
+            c.deviation_percent,
+            c.tolerance_percent,
+            c.what
+        );
+    }
+    let _ = writeln!(
+        s,
+        "  identified F = {:.6} N * exp({:.6} /mm * x) + {:.6} N; EKF k2 = {:.6} +- {:.6} /mm",
+        v.identified.mu_n,
+        v.identified.k2_per_mm,
+        v.identified.f0_n,
+        v.ekf_k2_per_mm,
+        v.ekf_k2_per_mm_std
+    );
+    s
+}
+
+/// `validation.svg`: stiffness against force (scatter and designed line) and the estimates
+/// converging over time.
+pub fn validation_svg(v: &Validation, run: &EkfRun) -> String {
+    let n = run.states.len();
+    let stride = (n / 1500).max(1);
+    let scatter: Vec<(f64, f64)> = run.states[n / 2..]
+        .iter()
+        .zip(&run.offsets[n / 2..])
+        .step_by(stride)
+        .map(|(z, off)| (spring_force_n(z, off), z[idx::SIGMA]))
+        .collect();
+    let fmax = scatter.iter().fold(0.0_f64, |m, p| m.max(p.0));
+    let fmin = scatter.iter().fold(f64::INFINITY, |m, p| m.min(p.0));
+    let line: Vec<(f64, f64)> = (0..=50)
+        .map(|i| {
+            let f = fmin + (fmax - fmin) * i as f64 / 50.0;
+            (f, v.designed.k2_per_mm * (f - v.designed.f0_n))
+        })
+        .collect();
+    let stiffness = Panel {
+        title: "Stiffness against force (converged half of the run)".into(),
+        x_label: "spring force F (N)".into(),
+        y_label: "stiffness sigma (N/mm)".into(),
+        series: vec![
+            Series {
+                label: "EKF estimate".into(),
+                points: scatter,
+                color: "#1f77b4",
+                dashed: false,
+                dots: true,
+            },
+            Series {
+                label: format!(
+                    "design: sigma = {:.4} /mm (F - {:.3} N)",
+                    v.designed.k2_per_mm, v.designed.f0_n
+                ),
+                points: line,
+                color: "#000",
+                dashed: false,
+                dots: false,
+            },
+        ],
+        ..Default::default()
+    };
+    let pct = |k: usize, reference: f64| -> Vec<(f64, f64)> {
+        run.states
+            .iter()
+            .zip(&run.t_s)
+            .step_by(stride)
+            .map(|(z, t)| (*t, 100.0 * (z[k] / reference - 1.0)))
+            .collect()
+    };
+    let last = run.last.z;
+    let mut k2 = pct(idx::K2, v.designed.k2_per_mm);
+    let mut m = pct(idx::M, last[idx::M]);
+    // Clip the first transient so that the converged part stays readable.
+    for p in k2.iter_mut().chain(m.iter_mut()) {
+        p.1 = p.1.clamp(-20.0, 20.0);
+    }
+    let t_end = run.t_s.last().copied().unwrap_or(0.0);
+    let tol = v.criteria.first().map_or(0.0, |c| c.tolerance_percent);
+    let convergence = Panel {
+        title: "Estimates over time".into(),
+        x_label: "time t (s)".into(),
+        y_label: "deviation (%)".into(),
+        series: vec![
+            Series {
+                label: "k2 against the design".into(),
+                points: k2,
+                color: "#d62728",
+                dashed: false,
+                dots: false,
+            },
+            Series {
+                label: "M against its final value".into(),
+                points: m,
+                color: "#2ca02c",
+                dashed: false,
+                dots: false,
+            },
+            Series {
+                label: format!("tolerance +-{tol:.2} %"),
+                points: vec![(run.t_s[0], tol), (t_end, tol)],
+                color: "#888",
+                dashed: true,
+                dots: false,
+            },
+            Series {
+                label: String::new(),
+                points: vec![(run.t_s[0], -tol), (t_end, -tol)],
+                color: "#888",
+                dashed: true,
+                dots: false,
+            },
+        ],
+        ..Default::default()
+    };
+    plot::document(&[stiffness, convergence], 620.0, 460.0).to_string()
 }

@@ -1,0 +1,411 @@
+//! The command line as types: every choice is a `ValueEnum` or a typed value parser, so a
+//! wrong value is refused by clap (exit code 2, naming the option and the choices) before any
+//! work starts, and the commands receive typed options.
+
+use std::path::PathBuf;
+
+use clap::{Parser, Subcommand, ValueEnum};
+
+use camspring::app::InitSource;
+use camspring::estimate::ekf::{Discretization, ForceRate};
+use camspring::estimate::sim::Profile;
+use camspring::units::{parse_duration_s, parse_fraction, parse_rate_hz};
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "camspring",
+    version,
+    about = "Design exponential cam springs and check them",
+    long_about = None,
+    after_help = "Examples:
+  camspring design                                  # the built-in default spec into out/paper/
+  camspring init my.toml && camspring design my.toml
+  camspring sweep my.toml --vary spring_rate=2..20 --vary preload=0..10
+  camspring simulate -o calib.csv && camspring validate specs/paper.toml calib.csv
+
+Exit codes: 0 done, 1 a check or the validation failed, 2 bad input, 3 an output could not be written.
+More: README.md, docs/SPEC.md, docs/CALIBRATION.md, docs/JSON.md, `camspring <command> --help`."
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The commands, in workflow order: design first, then the other design-side commands, then
+/// calibration from simulating a log to validating a built spring, then shell helpers.
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Solve the law, synthesise the cam, run the checks and write the outputs.
+    ///
+    /// Examples:
+    ///   camspring design                         # built-in default spec (specs/paper.toml)
+    ///   camspring design specs/ankle.toml -o out/ankle
+    ///   camspring design specs/paper.toml --json # summary on stdout
+    #[command(verbatim_doc_comment)]
+    Design {
+        /// Spec file (TOML); the built-in default spec when omitted.
+        spec: Option<PathBuf>,
+        /// Output folder (default: out/<spec name>).
+        #[arg(short, long)]
+        out: Option<PathBuf>,
+        /// Print the design summary as JSON on stdout instead of the text report.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Write a commented starter spec to edit (every key, with its default and unit).
+    ///
+    /// Examples:
+    ///   camspring init my.toml && camspring design my.toml
+    #[command(verbatim_doc_comment)]
+    Init {
+        /// Spec file to write.
+        path: PathBuf,
+        /// Overwrite an existing file.
+        #[arg(long)]
+        force: bool,
+        /// Print what was written as JSON on stdout.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Explore a grid of follower designs in parallel: pressure angle, lift and contact stress.
+    ///
+    /// Writes sweep.csv (one row per design) and sweep.svg.
+    ///
+    /// Examples:
+    ///   camspring sweep specs/paper.toml --vary spring_rate=2..20 --vary preload=0..10
+    ///   camspring sweep specs/paper.toml --vary roller_radius=1..5:9 --vary friction=0,0.01,0.05
+    #[command(verbatim_doc_comment)]
+    Sweep {
+        /// Spec file (TOML); the built-in default spec when omitted.
+        spec: Option<PathBuf>,
+        /// An axis: KEY=A..B (10 values), KEY=A..B:N or KEY=V1,V2,...; keys spring_rate (N/mm),
+        /// preload (mm), roller_radius (mm), friction. Repeat for up to 3 axes.
+        #[arg(long, required = true, value_parser = parse_axis)]
+        vary: Vec<camspring::sweep::Axis>,
+        /// Output folder (default out/<spec name>/sweep).
+        #[arg(short, long)]
+        out: Option<PathBuf>,
+        /// Print every grid point as JSON on stdout.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Simulate a calibration run of the spec's designed spring, with known truth.
+    ///
+    /// The log is CSV (t_s,force_n,position_mm); the truth JSON holds the parameters and
+    /// sigma(t), D(t), M at every sample.
+    ///
+    /// Examples:
+    ///   camspring simulate specs/paper.toml -o out/paper/calib.csv --truth out/paper/truth.json
+    ///   camspring simulate --profile static --duration 600s -o static.csv
+    ///   camspring simulate --profile steps --d0 0.2 --seed 7 --rate 1kHz
+    #[command(verbatim_doc_comment)]
+    Simulate {
+        /// Spec file (TOML); the built-in default spec when omitted.
+        spec: Option<PathBuf>,
+        /// Log to write (default out/<spec name>/calib.csv).
+        #[arg(short, long)]
+        out: Option<PathBuf>,
+        /// Truth JSON to write (default: the log's name with .truth.json).
+        #[arg(long)]
+        truth: Option<PathBuf>,
+        /// Print what was written as JSON on stdout.
+        #[arg(long)]
+        json: bool,
+        /// Motion profile.
+        #[arg(long, value_enum, default_value_t = ProfileArg::Sines)]
+        profile: ProfileArg,
+        /// Duration, e.g. 300s, 5min, 1h.
+        #[arg(long, default_value = "300s", value_parser = duration)]
+        duration: f64,
+        /// Sampling rate, e.g. 100Hz, 1kHz.
+        #[arg(long, default_value = "100Hz", value_parser = rate)]
+        rate: f64,
+        /// Random seed (noise and step levels).
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Inertia m in N s^2/mm.
+        #[arg(long, default_value_t = 0.05, allow_hyphen_values = true)]
+        m: f64,
+        /// Coulomb friction d0 in N.
+        #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+        d0: f64,
+        /// Linear damping d1 in N s/mm.
+        #[arg(long, default_value_t = 0.2, allow_hyphen_values = true)]
+        d1: f64,
+        /// Cubic damping d2 in N s^3/mm^3.
+        #[arg(long, default_value_t = -1e-4, allow_hyphen_values = true)]
+        d2: f64,
+        /// Force noise variance in N^2 (the paper's 0.017).
+        #[arg(long, default_value_t = 0.017, allow_hyphen_values = true)]
+        force_variance: f64,
+        /// Position noise variance in mm^2 (the paper's 0.01).
+        #[arg(long, default_value_t = 0.01, allow_hyphen_values = true)]
+        position_variance: f64,
+    },
+    /// Sensor noise of a log recorded at rest: Allan variance of each channel, and allan.svg.
+    ///
+    /// Examples:
+    ///   camspring noise static.csv
+    ///   camspring noise static.csv --json > noise.json
+    ///   camspring noise rig.csv --time t:ms --force F:lbf --position x:in
+    #[command(verbatim_doc_comment)]
+    Noise {
+        /// Calibration log (CSV with a header).
+        log: PathBuf,
+        /// Allan plot to write (default allan.svg next to the log).
+        #[arg(long)]
+        svg: Option<PathBuf>,
+        /// Print the noise model as JSON on stdout.
+        #[arg(long)]
+        json: bool,
+        #[command(flatten)]
+        columns: Columns,
+    },
+    /// Identify m, d0, d1, d2, mu, F0 and k2 from a calibration log (paper section V).
+    ///
+    /// Examples:
+    ///   camspring identify out/paper/calib.csv
+    ///   camspring identify calib.csv --noise noise.json --json
+    ///   camspring identify rig.csv --time t:ms --force F:lbf --position x:in
+    #[command(verbatim_doc_comment)]
+    Identify {
+        /// Calibration log (CSV with a header).
+        log: PathBuf,
+        /// Print the result as JSON on stdout.
+        #[arg(long)]
+        json: bool,
+        #[command(flatten)]
+        sensors: Sensors,
+        #[command(flatten)]
+        columns: Columns,
+    },
+    /// Run the paper's EKF over a log: stiffness, damping and inertia on-line.
+    ///
+    /// Writes the time series (t_s, each state and its 1-sigma bound, F0 and d0) as CSV and
+    /// prints the final estimates (the paper's Table II).
+    ///
+    /// Examples:
+    ///   camspring estimate out/paper/calib.csv -o out/paper/est.csv
+    ///   camspring estimate calib.csv --init specs/paper.toml --json
+    ///   camspring estimate calib.csv --discretization euler     # the paper's, for comparison
+    #[command(verbatim_doc_comment)]
+    Estimate {
+        /// Calibration log (CSV with a header).
+        log: PathBuf,
+        /// Time series CSV to write (default: the log's name with .est.csv).
+        #[arg(short, long)]
+        out: Option<PathBuf>,
+        /// Print the final estimates as JSON on stdout.
+        #[arg(long)]
+        json: bool,
+        #[command(flatten)]
+        filter: FilterArgs,
+        #[command(flatten)]
+        sensors: Sensors,
+        #[command(flatten)]
+        columns: Columns,
+    },
+    /// Check a built spring's calibration log against its design: one verdict.
+    ///
+    /// Exit code 0 pass, 1 fail, 2 bad input. Writes validation.svg next to the log.
+    ///
+    /// Examples:
+    ///   camspring validate specs/paper.toml out/paper/calib.csv
+    ///   camspring validate specs/paper.toml calib.csv --tolerance 3% --json
+    #[command(verbatim_doc_comment)]
+    Validate {
+        /// Spec file (TOML) of the design.
+        spec: PathBuf,
+        /// Calibration log (CSV with a header).
+        log: PathBuf,
+        /// Allowed relative deviation of each criterion, e.g. 3%.
+        #[arg(long, default_value = "3%", value_parser = fraction)]
+        tolerance: f64,
+        /// Plot to write (default validation.svg next to the log).
+        #[arg(long)]
+        svg: Option<PathBuf>,
+        /// Print the verdict as JSON on stdout.
+        #[arg(long)]
+        json: bool,
+        #[command(flatten)]
+        filter: FilterArgs,
+        #[command(flatten)]
+        sensors: Sensors,
+        #[command(flatten)]
+        columns: Columns,
+    },
+    /// Print a shell completion script.
+    ///
+    /// Examples:
+    ///   camspring completions bash > ~/.local/share/bash-completion/completions/camspring
+    ///   camspring completions zsh > ~/.zfunc/_camspring
+    #[command(verbatim_doc_comment)]
+    Completions {
+        /// Shell: bash, zsh, fish, elvish or powershell.
+        shell: clap_complete::Shell,
+    },
+    /// Write man pages (camspring.1 and one per subcommand), or print camspring.1.
+    ///
+    /// Examples:
+    ///   camspring man -o /usr/local/share/man/man1
+    ///   camspring man | man -l -
+    #[command(verbatim_doc_comment)]
+    Man {
+        /// Folder to write the pages to (default: print camspring.1 on stdout).
+        #[arg(short, long)]
+        out: Option<PathBuf>,
+    },
+}
+
+/// The simulated motion.
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ProfileArg {
+    /// Two superposed sines over most of the stroke.
+    Sines,
+    /// Slow ramps between levels with holds: quasi-static.
+    RampHold,
+    /// Quick smoothed steps between random levels.
+    Steps,
+    /// At rest at mid stroke (for noise models).
+    Static,
+}
+
+impl From<ProfileArg> for Profile {
+    fn from(p: ProfileArg) -> Profile {
+        match p {
+            ProfileArg::Sines => Profile::Sines,
+            ProfileArg::RampHold => Profile::RampHold,
+            ProfileArg::Steps => Profile::Steps,
+            ProfileArg::Static => Profile::Static,
+        }
+    }
+}
+
+/// The EKF's prediction step.
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DiscretizationArg {
+    /// Classic Runge-Kutta (accurate).
+    Rk4,
+    /// The paper's forward Euler (biased; for comparison).
+    Euler,
+}
+
+impl From<DiscretizationArg> for Discretization {
+    fn from(d: DiscretizationArg) -> Discretization {
+        match d {
+            DiscretizationArg::Rk4 => Discretization::Rk4,
+            DiscretizationArg::Euler => Discretization::Euler,
+        }
+    }
+}
+
+/// Sensor noise and filter window for identification and estimation.
+#[derive(clap::Args, Debug)]
+pub struct Sensors {
+    /// Sensor noise from `camspring noise --json` (default: the paper's sensors).
+    #[arg(long)]
+    pub noise: Option<PathBuf>,
+    /// Force noise variance in N^2 (overrides --noise).
+    #[arg(long, value_parser = variance)]
+    pub force_variance: Option<f64>,
+    /// Position noise variance in mm^2 (overrides --noise).
+    #[arg(long, value_parser = variance)]
+    pub position_variance: Option<f64>,
+    /// Savitzky-Golay window, e.g. 0.8s (default about 0.4 s); longer for slow runs.
+    #[arg(long, value_parser = duration)]
+    pub window: Option<f64>,
+}
+
+/// EKF options.
+#[derive(clap::Args, Debug)]
+pub struct FilterArgs {
+    /// Initial state: `identify` (offline identification of the same log) or a spec file.
+    #[arg(long, default_value = "identify", value_parser = init_source)]
+    pub init: InitSource,
+    /// Prediction method.
+    #[arg(long, value_enum, default_value_t = DiscretizationArg::Rk4)]
+    pub discretization: DiscretizationArg,
+    /// Force-rate input: zero-phase (offline) or first-order[:TIME] (the paper's filter; TIME defaults to 0.02s).
+    #[arg(long, default_value = "zero-phase", value_parser = force_rate)]
+    pub force_rate: ForceRate,
+    /// Process noise density of a state, e.g. --q xdd=0.5 --q sigma=1e-3 (repeatable;
+    /// states x, xd, xdd, sigma, d, m, k2, d2; units^2 per s).
+    #[arg(long, value_name = "STATE=VALUE")]
+    pub q: Vec<String>,
+    /// Initial standard deviation of a state, e.g. --p0 m=0.01 (repeatable).
+    #[arg(long, value_name = "STATE=VALUE")]
+    pub p0: Vec<String>,
+    /// Position measurement variance R in mm^2 (default: the position noise).
+    #[arg(long, value_parser = positive_variance)]
+    pub r: Option<f64>,
+}
+
+/// Column mapping of a calibration log.
+#[derive(clap::Args, Debug)]
+pub struct Columns {
+    /// Time column and unit (s, ms, us, min, h).
+    #[arg(long, default_value = "t_s")]
+    pub time: String,
+    /// Force column and unit (N, kN, lbf).
+    #[arg(long, default_value = "force_n")]
+    pub force: String,
+    /// Position column and unit (mm, m, in).
+    #[arg(long, default_value = "position_mm")]
+    pub position: String,
+    /// Allowed deviation of each sampling interval from the first, e.g. 10%.
+    #[arg(long, default_value = "10%", value_parser = fraction)]
+    pub sampling_tolerance: f64,
+}
+
+fn duration(text: &str) -> Result<f64, String> {
+    parse_duration_s(text)
+}
+
+fn rate(text: &str) -> Result<f64, String> {
+    parse_rate_hz(text)
+}
+
+fn fraction(text: &str) -> Result<f64, String> {
+    parse_fraction(text)
+}
+
+fn variance(text: &str) -> Result<f64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        _ => Err(format!("\"{text}\": expected a variance >= 0")),
+    }
+}
+
+fn positive_variance(text: &str) -> Result<f64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("\"{text}\": expected a variance > 0 (mm^2)")),
+    }
+}
+
+fn parse_axis(text: &str) -> Result<camspring::sweep::Axis, String> {
+    camspring::sweep::parse_axis(text)
+}
+
+fn init_source(text: &str) -> Result<InitSource, String> {
+    Ok(if text == "identify" {
+        InitSource::Identify
+    } else {
+        InitSource::Spec(PathBuf::from(text))
+    })
+}
+
+fn force_rate(text: &str) -> Result<ForceRate, String> {
+    match text.split_once(':') {
+        None if text == "zero-phase" => Ok(ForceRate::ZeroPhase),
+        None if text == "first-order" => Ok(ForceRate::FirstOrder {
+            time_constant_s: 0.02,
+        }),
+        Some(("first-order", t)) => Ok(ForceRate::FirstOrder {
+            time_constant_s: parse_duration_s(t)?,
+        }),
+        _ => Err(format!(
+            "\"{text}\": expected zero-phase or first-order[:TIME]"
+        )),
+    }
+}

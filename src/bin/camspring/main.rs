@@ -1,0 +1,422 @@
+//! The `camspring` command line: parses arguments ([`cli`]), calls the library's commands
+//! ([`camspring::app`]), and prints one report through [`emit`].
+//!
+//! Exit codes: 0 done (warnings allowed), 1 a design check or a validation failed (outputs
+//! still written), 2 bad input (spec, log, arguments), 3 an output could not be written.
+
+mod cli;
+
+use std::io::Write as _;
+use std::path::Path;
+use std::process::ExitCode;
+
+use clap::{CommandFactory, Parser};
+use serde_json::json;
+
+use camspring::app::{
+    self, load_noise_json, parse_state_override, run_design, run_estimate, run_identify, run_noise,
+    run_simulate, run_sweep, run_validate, InitSource, SimulateOptions, EXIT_BAD_INPUT,
+    EXIT_CHECK_FAILED, EXIT_IO, EXIT_OK,
+};
+use camspring::cam::checks::Status;
+use camspring::estimate::log::{parse_column, parse_time_column, ColumnMap};
+use camspring::estimate::sim::{Dynamics, Noise, SimSettings};
+use camspring::export::ExportError;
+use camspring::render::calibration::{
+    estimate_json, format_estimate, format_identification, format_noise, format_validation,
+    identification_json, noise_json,
+};
+use camspring::render::design::format_design;
+use camspring::spec::STARTER_SPEC_TOML;
+use camspring::units::Dimension;
+use camspring::{Error, EstimateOptions, SensorNoise};
+
+use cli::{Cli, Columns, Command, FilterArgs, Sensors};
+
+/// What a command has to say: its text, its JSON (already encoded, in the field order of its
+/// type) and its exit code.
+struct Report {
+    text: String,
+    json: String,
+    code: u8,
+    coloured: bool,
+}
+
+impl Report {
+    fn new(text: String, json: String) -> Report {
+        Report {
+            text,
+            json,
+            code: EXIT_OK,
+            coloured: false,
+        }
+    }
+
+    /// A report of checks: PASS, WARN and FAIL are coloured on a terminal.
+    fn of_checks(text: String, json: String, code: u8) -> Report {
+        Report {
+            code,
+            coloured: true,
+            ..Report::new(text, json)
+        }
+    }
+}
+
+/// Prints a report (its text, or its JSON with `--json`) or an error, and returns the exit
+/// code. A closed pipe (`camspring ... | head`) ends quietly; any other failure to write
+/// stdout is exit code 3.
+fn emit(result: Result<Report, Error>, json: bool) -> ExitCode {
+    let report = match result {
+        Ok(r) => r,
+        Err(e) => {
+            // Every message already carries its cause (key, line, OS error).
+            eprintln!("error: {e}");
+            return ExitCode::from(if e.is_bad_input() {
+                EXIT_BAD_INPUT
+            } else {
+                EXIT_IO
+            });
+        }
+    };
+    let text = if json {
+        report.json + "\n"
+    } else if report.coloured {
+        colour(&report.text)
+    } else {
+        report.text
+    };
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        Ok(()) => ExitCode::from(report.code),
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => ExitCode::from(report.code),
+        Err(e) => {
+            eprintln!("error: cannot write to stdout: {e}");
+            ExitCode::from(EXIT_IO)
+        }
+    }
+}
+
+/// Colours the status words PASS, WARN, FAIL and REFUSED, only when stdout is a terminal and
+/// NO_COLOR is not set (https://no-color.org).
+fn colour(text: &str) -> String {
+    use std::io::IsTerminal;
+    if !std::io::stdout().is_terminal() || std::env::var_os("NO_COLOR").is_some() {
+        return text.to_string();
+    }
+    text.replace("PASS", "\x1b[32mPASS\x1b[0m")
+        .replace("WARN", "\x1b[33mWARN\x1b[0m")
+        .replace("FAIL", "\x1b[31mFAIL\x1b[0m")
+        .replace("REFUSED", "\x1b[31mREFUSED\x1b[0m")
+}
+
+fn to_json(v: &impl serde::Serialize) -> Result<String, Error> {
+    serde_json::to_string_pretty(v).map_err(|e| {
+        Error::Export(ExportError::Encode {
+            what: "the JSON result",
+            message: e.to_string(),
+        })
+    })
+}
+
+fn sensors(s: &Sensors) -> Result<SensorNoise, Error> {
+    let mut sensor = match &s.noise {
+        Some(p) => load_noise_json(p)?,
+        None => SensorNoise::default(),
+    };
+    if let Some(v) = s.force_variance {
+        sensor.force_variance_n2 = v;
+    }
+    if let Some(v) = s.position_variance {
+        sensor.position_variance_mm2 = v;
+    }
+    Ok(sensor)
+}
+
+fn filter_options(f: &FilterArgs, s: &Sensors) -> Result<EstimateOptions, Error> {
+    let mut opts = EstimateOptions::new(sensors(s)?);
+    opts.window_s = s.window;
+    opts.discretization = f.discretization.into();
+    opts.force_rate = f.force_rate;
+    opts.q =
+        f.q.iter()
+            .map(|t| parse_state_override(t, "--q"))
+            .collect::<Result<_, _>>()?;
+    opts.p0_std =
+        f.p0.iter()
+            .map(|t| parse_state_override(t, "--p0"))
+            .collect::<Result<_, _>>()?;
+    opts.r_position_mm2 = f.r;
+    app::with_init(opts, &f.init)
+}
+
+fn columns(c: &Columns) -> Result<ColumnMap, Error> {
+    let arg = |e: camspring::estimate::log::LogError| Error::Argument(e.to_string());
+    Ok(ColumnMap {
+        time: parse_time_column(&c.time).map_err(arg)?,
+        force: parse_column(&c.force, Dimension::Force, "force").map_err(arg)?,
+        position: parse_column(&c.position, Dimension::Length, "position").map_err(arg)?,
+    })
+}
+
+/// `camspring man`: camspring.1 on stdout, or every page into a folder.
+fn man_pages(out: Option<&Path>) -> Result<Report, Error> {
+    let cmd = Cli::command();
+    let render = |c: &clap::Command| -> Result<Vec<u8>, Error> {
+        let mut buf = Vec::new();
+        clap_mangen::Man::new(c.clone())
+            .render(&mut buf)
+            .map_err(|e| {
+                Error::Export(ExportError::Encode {
+                    what: "man page",
+                    message: e.to_string(),
+                })
+            })?;
+        Ok(buf)
+    };
+    let Some(dir) = out else {
+        let page = String::from_utf8_lossy(&render(&cmd)?).into_owned();
+        return Ok(Report::new(page, String::new()));
+    };
+    let mut pages = vec![("camspring.1".to_string(), cmd.clone())];
+    for sub in cmd.get_subcommands() {
+        // clap names are 'static; a few page names live until the process ends.
+        let name: &'static str =
+            Box::leak(format!("camspring-{}", sub.get_name()).into_boxed_str());
+        pages.push((format!("{name}.1"), sub.clone().name(name)));
+    }
+    let mut text = String::new();
+    let mut written = Vec::new();
+    for (file, c) in pages {
+        let path = dir.join(&file);
+        camspring::write_atomic(&path, &render(&c)?)?;
+        text.push_str(&format!("  {}\n", path.display()));
+        written.push(path);
+    }
+    Ok(Report::new(text, to_json(&json!({ "written": written }))?))
+}
+
+fn init(path: &Path, force: bool) -> Result<Report, Error> {
+    if path.exists() && !force {
+        return Err(Error::Argument(format!(
+            "{} exists; choose another name or pass --force to overwrite it",
+            path.display()
+        )));
+    }
+    camspring::write_atomic(path, STARTER_SPEC_TOML.as_bytes())?;
+    Ok(Report::new(
+        format!(
+            "wrote {}; edit it, then: camspring design {}\n",
+            path.display(),
+            path.display()
+        ),
+        to_json(&json!({ "spec": path }))?,
+    ))
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match cli.command {
+        Command::Design { spec, out, json } => emit(
+            run_design(spec.as_deref(), out.as_deref()).and_then(|run| {
+                Ok(Report::of_checks(
+                    format_design(&run.summary, &run.written),
+                    to_json(&run.summary)?,
+                    run.exit_code(),
+                ))
+            }),
+            json,
+        ),
+        Command::Init { path, force, json } => emit(init(&path, force), json),
+        Command::Sweep {
+            spec,
+            vary,
+            out,
+            json,
+        } => emit(
+            run_sweep(spec.as_deref(), &vary, out.as_deref()).and_then(|run| {
+                let count = |s: Status| {
+                    run.points
+                        .iter()
+                        .filter(|p| p.result.as_ref().is_ok_and(|r| r.status == s))
+                        .count()
+                };
+                let mut text = format!(
+                    "{} designs: {} pass, {} warn, {} fail, {} without a design\n",
+                    run.points.len(),
+                    count(Status::Pass),
+                    count(Status::Warn),
+                    count(Status::Fail),
+                    run.points.iter().filter(|p| p.result.is_err()).count()
+                );
+                for p in &run.written {
+                    text.push_str(&format!("  {}\n", p.display()));
+                }
+                Ok(Report::new(text, to_json(&run.points)?))
+            }),
+            json,
+        ),
+        Command::Simulate {
+            spec,
+            out,
+            truth,
+            json,
+            profile,
+            duration,
+            rate,
+            seed,
+            m,
+            d0,
+            d1,
+            d2,
+            force_variance,
+            position_variance,
+        } => {
+            let settings = SimSettings {
+                profile: profile.into(),
+                duration_s: duration,
+                rate_hz: rate,
+                seed,
+                dynamics: Dynamics {
+                    m_n_s2_per_mm: m,
+                    d0_n: d0,
+                    d1_n_s_per_mm: d1,
+                    d2_n_s3_per_mm3: d2,
+                },
+                noise: Noise {
+                    force_variance_n2: force_variance,
+                    position_variance_mm2: position_variance,
+                },
+            };
+            let opts = SimulateOptions {
+                settings,
+                log_path: out,
+                truth_path: truth,
+            };
+            emit(
+                run_simulate(spec.as_deref(), &opts).and_then(|run| {
+                    let text = format!(
+                        "simulated {} samples of F = {:.6} N * exp({:.6} /mm * x) + {:.6} N\n  log:   {}\n  truth: {}\n",
+                        run.samples,
+                        run.law.mu_n,
+                        run.law.k2_per_mm,
+                        run.law.f0_n,
+                        run.log_path.display(),
+                        run.truth_path.display()
+                    );
+                    let json = json!({
+                        "log": run.log_path,
+                        "truth": run.truth_path,
+                        "samples": run.samples,
+                        "law": run.law,
+                    });
+                    Ok(Report::new(text, to_json(&json)?))
+                }),
+                json,
+            )
+        }
+        Command::Noise {
+            log,
+            svg,
+            json,
+            columns: c,
+        } => emit(
+            columns(&c)
+                .and_then(|map| run_noise(&log, &map, c.sampling_tolerance, svg.as_deref()))
+                .and_then(|run| {
+                    let text = format!(
+                        "{}  plot: {}\n",
+                        format_noise(&run.model),
+                        run.svg_path.display()
+                    );
+                    Ok(Report::new(text, to_json(&noise_json(&run.model))?))
+                }),
+            json,
+        ),
+        Command::Identify {
+            log,
+            json,
+            sensors: s,
+            columns: c,
+        } => emit(
+            (|| {
+                let map = columns(&c)?;
+                let sensor = sensors(&s)?;
+                let (id, log) = run_identify(&log, &map, c.sampling_tolerance, &sensor, s.window)?;
+                Ok(Report::new(
+                    format_identification(&id),
+                    to_json(&identification_json(&id, &sensor, &log))?,
+                ))
+            })(),
+            json,
+        ),
+        Command::Estimate {
+            log,
+            out,
+            json,
+            filter,
+            sensors: s,
+            columns: c,
+        } => emit(
+            (|| {
+                let map = columns(&c)?;
+                let opts = filter_options(&filter, &s)?;
+                let (est, path) =
+                    run_estimate(&log, &map, c.sampling_tolerance, &opts, out.as_deref())?;
+                Ok(Report::new(
+                    format!(
+                        "{}  time series: {}\n",
+                        format_estimate(&est.run),
+                        path.display()
+                    ),
+                    to_json(&estimate_json(&est.run, &est.settings))?,
+                ))
+            })(),
+            json,
+        ),
+        Command::Validate {
+            spec,
+            log,
+            tolerance,
+            svg,
+            json,
+            filter,
+            sensors: s,
+            columns: c,
+        } => emit(
+            (|| {
+                if !matches!(filter.init, InitSource::Identify) {
+                    return Err(Error::Argument(
+                        "validate: --init must be identify (the design is what is checked)".into(),
+                    ));
+                }
+                let map = columns(&c)?;
+                let opts = filter_options(&filter, &s)?;
+                let (v, path) = run_validate(
+                    Some(&spec),
+                    &log,
+                    &map,
+                    c.sampling_tolerance,
+                    &opts,
+                    tolerance,
+                    svg.as_deref(),
+                )?;
+                let code = if v.pass { EXIT_OK } else { EXIT_CHECK_FAILED };
+                let text = format!("{}  plot: {}\n", format_validation(&v), path.display());
+                Ok(Report::of_checks(text, to_json(&v)?, code))
+            })(),
+            json,
+        ),
+        Command::Completions { shell } => {
+            let mut buf = Vec::new();
+            clap_complete::generate(shell, &mut Cli::command(), "camspring", &mut buf);
+            emit(
+                Ok(Report::new(
+                    String::from_utf8_lossy(&buf).into_owned(),
+                    String::new(),
+                )),
+                false,
+            )
+        }
+        Command::Man { out } => emit(man_pages(out.as_deref()), false),
+    }
+}

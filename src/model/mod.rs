@@ -1,0 +1,749 @@
+//! The domain model: what a design is made from, in default units (mm, N, N/mm, 1/mm, deg,
+//! MPa), and the rules a usable spec obeys.
+//!
+//! Everything above imports this layer; it imports nothing but [`crate::units`]. A [`Spec`]
+//! can come from TOML ([`crate::spec::parse`]) or from code ([`Spec::builder`]); both end in
+//! [`Spec::validate`], the single home of every range rule, so the same mistake gets the same
+//! error naming the same key whichever way the spec was made.
+//!
+//! ```
+//! use camspring::model::{Follower, LawSpec, LawTargets, PartSpec, Spec};
+//! let law = LawSpec::Targets(LawTargets {
+//!     fmax_n: 200.0, fmin_n: 5.0, xmax_mm: 20.0, l0_mm: 5.0, c0: 0.2, delta0_mm: 1.0,
+//! });
+//! let spec = Spec::builder(law.clone(), Follower::new(5.0, 3.0).with_count(2).with_preload(1.5))
+//!     .name("mine")
+//!     .part(PartSpec::default().with_thickness(12.0))
+//!     .build()
+//!     .unwrap();
+//! assert_eq!(spec.part.roller_width_mm, 12.0);
+//! // The same rules as a TOML spec, naming the same key:
+//! let err = Spec::builder(law, Follower::new(-5.0, 3.0)).build().unwrap_err();
+//! assert!(err.to_string().contains("follower.spring_rate"));
+//! ```
+
+pub mod follower;
+pub mod law;
+pub mod machining;
+pub mod part;
+
+use serde::Serialize;
+
+pub use follower::{Follower, FrictionCorrection, FrictionSource, SpringArrangement, MAX_FRICTION};
+pub use law::{ExpLaw, LawSpec, LawTargets};
+pub use machining::{Coolant, Dialect, MachiningSpec, WorkOffset};
+pub use part::{Hole, Material, PartSpec, MATERIALS};
+
+/// Line contact between cylinders first yields below the surface when the peak Hertz pressure
+/// reaches about 1.67 times the tensile yield strength (Tresca, nu = 0.3; K. L. Johnson,
+/// *Contact Mechanics*, 1985, section 4.2).
+pub const HERTZ_YIELD_FACTOR: f64 = 1.67;
+
+/// The most holding tabs a program may leave on the outline.
+pub const MAX_TABS: usize = 16;
+
+/// Why a spec was refused. Every variant names the key it is about.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SpecError {
+    /// Produced by the TOML reader ([`crate::spec::parse`]) for syntax errors, unknown keys
+    /// and wrong value types; the message gives line, column and the key.
+    #[error("{0}")]
+    Syntax(String),
+    /// Produced by [`Spec::validate`] (and the TOML reader, for a wrong unit) for a value out
+    /// of range, not finite, or inconsistent with another key.
+    #[error("{}`{key}` = {found}: expected {expected}", line_prefix(*.line))]
+    Invalid {
+        /// Dotted key path, e.g. `follower.spring_rate`.
+        key: String,
+        /// 1-based line of the value in the spec, when known.
+        line: Option<usize>,
+        /// The value as written (TOML) or in default units (code).
+        found: String,
+        /// What would have been accepted.
+        expected: String,
+    },
+    /// Produced by the TOML reader when a required key is absent.
+    #[error("missing `{key}`: expected {expected}")]
+    Missing {
+        /// Dotted key path.
+        key: String,
+        /// What to write there.
+        expected: String,
+    },
+}
+
+fn line_prefix(line: Option<usize>) -> String {
+    line.map(|l| format!("line {l}: ")).unwrap_or_default()
+}
+
+impl SpecError {
+    /// The key the error is about, if it names one.
+    pub fn key(&self) -> Option<&str> {
+        match self {
+            SpecError::Syntax(_) => None,
+            SpecError::Invalid { key, .. } | SpecError::Missing { key, .. } => Some(key),
+        }
+    }
+}
+
+/// Limits for the design checks.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ChecksSpec {
+    /// Largest acceptable pressure angle.
+    pub max_pressure_angle_deg: f64,
+    /// Smallest acceptable margin from self-locking (loading: 90 deg - (theta + phi);
+    /// unloading: theta - phi).
+    pub min_locking_margin_deg: f64,
+    /// Largest acceptable Hertz contact pressure (default: [`HERTZ_YIELD_FACTOR`] x the weaker
+    /// yield strength, the onset of subsurface yield in a line contact).
+    pub max_contact_stress_mpa: f64,
+}
+
+impl ChecksSpec {
+    /// The default limits for a cam and roller of these materials.
+    pub fn for_materials(cam: &Material, roller: &Material) -> ChecksSpec {
+        ChecksSpec {
+            max_pressure_angle_deg: 60.0,
+            min_locking_margin_deg: 5.0,
+            max_contact_stress_mpa: HERTZ_YIELD_FACTOR
+                * cam.yield_strength_mpa.min(roller.yield_strength_mpa),
+        }
+    }
+}
+
+impl Default for ChecksSpec {
+    /// 60 deg, 5 deg, and the contact limit of the default materials.
+    fn default() -> Self {
+        ChecksSpec::for_materials(&Material::default_cam(), &Material::default_roller())
+    }
+}
+
+/// Output sampling settings.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct OutputSpec {
+    /// Largest chord error of the sampled pitch curve and cam surface polylines.
+    pub chord_tolerance_mm: f64,
+    /// Largest deviation of the STEP/DXF B-spline cam edge from the exact cam surface.
+    pub fit_tolerance_mm: f64,
+    /// Largest chord error of the STL mesh from the exact part.
+    pub stl_tolerance_mm: f64,
+}
+
+impl Default for OutputSpec {
+    /// 1 um chords and B-spline fit, 5 um STL.
+    fn default() -> Self {
+        OutputSpec {
+            chord_tolerance_mm: 1e-3,
+            fit_tolerance_mm: 1e-3,
+            stl_tolerance_mm: 5e-3,
+        }
+    }
+}
+
+/// A design spec in default units.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Spec {
+    /// Design name (used for the default output folder).
+    pub name: String,
+    /// The force law, as targets or given.
+    pub law: LawSpec,
+    /// Follower arrangement, springs, roller and friction.
+    pub follower: Follower,
+    /// The part.
+    pub part: PartSpec,
+    /// Machining settings.
+    pub machining: MachiningSpec,
+    /// Check limits.
+    pub checks: ChecksSpec,
+    /// Output settings.
+    pub output: OutputSpec,
+}
+
+/// Builds a [`Spec`] in code: the law and the followers are required, every other section
+/// takes its `Default` unless given. [`SpecBuilder::build`] validates.
+#[derive(Debug, Clone)]
+pub struct SpecBuilder {
+    spec: Spec,
+    checks_given: bool,
+}
+
+impl SpecBuilder {
+    /// The design name (default "design").
+    pub fn name(mut self, name: impl Into<String>) -> Self {
+        self.spec.name = name.into();
+        self
+    }
+
+    /// The part.
+    pub fn part(mut self, part: PartSpec) -> Self {
+        self.spec.part = part;
+        self
+    }
+
+    /// The machining settings.
+    pub fn machining(mut self, machining: MachiningSpec) -> Self {
+        self.spec.machining = machining;
+        self
+    }
+
+    /// The check limits (default: [`ChecksSpec::for_materials`] of the part's materials).
+    pub fn checks(mut self, checks: ChecksSpec) -> Self {
+        self.spec.checks = checks;
+        self.checks_given = true;
+        self
+    }
+
+    /// The output sampling settings.
+    pub fn output(mut self, output: OutputSpec) -> Self {
+        self.spec.output = output;
+        self
+    }
+
+    /// The validated spec, or the first rule it breaks.
+    pub fn build(mut self) -> Result<Spec, SpecError> {
+        if !self.checks_given {
+            let p = &self.spec.part;
+            self.spec.checks = ChecksSpec::for_materials(&p.cam_material, &p.roller_material);
+        }
+        self.spec.validate()?;
+        Ok(self.spec)
+    }
+}
+
+/// An allowed range of a quantity, in default units.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Range {
+    /// value > 0
+    Positive,
+    /// value >= 0
+    NonNegative,
+    /// any finite value
+    Any,
+    /// lo < value < hi
+    Open(f64, f64),
+    /// lo <= value < hi
+    HalfOpen(f64, f64),
+    /// lo <= value <= hi
+    Closed(f64, f64),
+}
+
+impl Range {
+    /// Whether `v` is finite and in the range.
+    pub fn contains(self, v: f64) -> bool {
+        v.is_finite()
+            && match self {
+                Range::Positive => v > 0.0,
+                Range::NonNegative => v >= 0.0,
+                Range::Any => true,
+                Range::Open(lo, hi) => v > lo && v < hi,
+                Range::HalfOpen(lo, hi) => v >= lo && v < hi,
+                Range::Closed(lo, hi) => v >= lo && v <= hi,
+            }
+    }
+
+    /// "a value greater than 0", "a value from 1 mm to 2 mm", ...
+    pub fn describe(self, unit: &str) -> String {
+        let u = if unit.is_empty() {
+            String::new()
+        } else {
+            format!(" {unit}")
+        };
+        match self {
+            Range::Positive => "a value greater than 0".into(),
+            Range::NonNegative => "a value of 0 or more".into(),
+            Range::Any => "any finite value".into(),
+            Range::Open(lo, hi) => format!("a value between {lo}{u} and {hi}{u} (exclusive)"),
+            Range::HalfOpen(lo, hi) => {
+                format!("a value from {lo}{u} up to (not including) {hi}{u}")
+            }
+            Range::Closed(lo, hi) => format!("a value from {lo}{u} to {hi}{u}"),
+        }
+    }
+}
+
+/// The value as [`Spec::validate`] reports it: the number and its default unit.
+pub fn found_value(value: f64, unit: &str) -> String {
+    if unit.is_empty() {
+        format!("{value}")
+    } else {
+        format!("{value} {unit}")
+    }
+}
+
+/// An error for `key` = `found`, expecting `expected`.
+fn invalid(key: &str, found: String, expected: String) -> SpecError {
+    SpecError::Invalid {
+        key: key.to_string(),
+        line: None,
+        found,
+        expected,
+    }
+}
+
+/// `value` must lie in `range`; the error names `key`.
+fn check(key: &str, value: f64, range: Range, unit: &str) -> Result<(), SpecError> {
+    if range.contains(value) {
+        Ok(())
+    } else {
+        let expected = if value.is_finite() {
+            range.describe(unit)
+        } else {
+            "a finite value".to_string()
+        };
+        Err(invalid(key, found_value(value, unit), expected))
+    }
+}
+
+/// Whether `name` can name an output folder: letters, digits, '-', '_' or '.', not starting
+/// with '.'.
+pub fn is_valid_name(name: &str) -> bool {
+    !name.is_empty()
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
+        && !name.starts_with('.')
+}
+
+impl Spec {
+    /// A builder for a spec made in code; see the module example.
+    pub fn builder(law: LawSpec, follower: Follower) -> SpecBuilder {
+        SpecBuilder {
+            spec: Spec {
+                name: "design".into(),
+                law,
+                follower,
+                part: PartSpec::default(),
+                machining: MachiningSpec::default(),
+                checks: ChecksSpec::default(),
+                output: OutputSpec::default(),
+            },
+            checks_given: false,
+        }
+    }
+
+    /// Checks every range rule and every rule between keys, section by section, and returns
+    /// the first broken one, naming its key. A spec from TOML, from the builder or changed by
+    /// a sweep all pass through here.
+    pub fn validate(&self) -> Result<(), SpecError> {
+        if !is_valid_name(&self.name) {
+            return Err(invalid(
+                "name",
+                format!("\"{}\"", self.name),
+                "a non-empty name of letters, digits, '-', '_' or '.' (it names the output folder)"
+                    .into(),
+            ));
+        }
+        validate_law(&self.law)?;
+        validate_follower(&self.follower)?;
+        validate_part(&self.part)?;
+        validate_machining(&self.machining, &self.part)?;
+        validate_checks(&self.checks)?;
+        validate_output(&self.output)
+    }
+}
+
+fn validate_law(law: &LawSpec) -> Result<(), SpecError> {
+    match law {
+        LawSpec::Targets(t) => {
+            check("law.fmax", t.fmax_n, Range::Positive, "N")?;
+            check("law.fmin", t.fmin_n, Range::Positive, "N")?;
+            check("law.xmax", t.xmax_mm, Range::Positive, "mm")?;
+            check("law.l0", t.l0_mm, Range::Positive, "mm")?;
+            check("law.c0", t.c0, Range::Positive, "")?;
+            check("law.delta0", t.delta0_mm, Range::Positive, "mm")?;
+            if t.fmax_n <= t.fmin_n {
+                return Err(invalid(
+                    "law.fmax",
+                    found_value(t.fmax_n, "N"),
+                    format!("a force greater than law.fmin = {} N", t.fmin_n),
+                ));
+            }
+            if t.xmax_mm <= t.l0_mm {
+                return Err(invalid(
+                    "law.xmax",
+                    found_value(t.xmax_mm, "mm"),
+                    format!("a deflection greater than law.l0 = {} mm", t.l0_mm),
+                ));
+            }
+            Ok(())
+        }
+        LawSpec::Given { law, xmax_mm } => {
+            check("law.xmax", *xmax_mm, Range::Positive, "mm")?;
+            check("law.mu", law.mu_n, Range::Positive, "N")?;
+            check("law.k2", law.k2_per_mm, Range::Positive, "1/mm")?;
+            check("law.f0", law.f0_n, Range::Any, "N")
+        }
+    }
+}
+
+fn validate_follower(f: &Follower) -> Result<(), SpecError> {
+    if !matches!(f.count, 1 | 2) {
+        return Err(invalid(
+            "follower.count",
+            f.count.to_string(),
+            "1 (one follower) or 2 (two followers on opposed cam surfaces)".into(),
+        ));
+    }
+    if f.arrangement == SpringArrangement::Shared && f.count != 2 {
+        return Err(invalid(
+            "follower.spring",
+            "\"shared\" with follower.count = 1".into(),
+            "\"per-follower\", or count = 2: a shared spring joins two opposed followers".into(),
+        ));
+    }
+    check(
+        "follower.spring_rate",
+        f.spring_rate_n_per_mm,
+        Range::Positive,
+        "N/mm",
+    )?;
+    check("follower.preload", f.preload_mm, Range::NonNegative, "mm")?;
+    check(
+        "follower.roller_radius",
+        f.roller_radius_mm,
+        Range::NonNegative,
+        "mm",
+    )?;
+    let friction_range = Range::HalfOpen(0.0, MAX_FRICTION);
+    match f.friction {
+        FrictionSource::Coefficient { coefficient } => {
+            check("follower.friction", coefficient, friction_range, "")?
+        }
+        FrictionSource::Pin {
+            pin_friction,
+            pin_radius_mm,
+            rolling_resistance_mm,
+        } => {
+            check("follower.pin_friction", pin_friction, friction_range, "")?;
+            check("follower.pin_radius", pin_radius_mm, Range::Positive, "mm")?;
+            if pin_radius_mm >= f.roller_radius_mm {
+                return Err(invalid(
+                    "follower.pin_radius",
+                    found_value(pin_radius_mm, "mm"),
+                    format!(
+                        "a pin radius smaller than follower.roller_radius = {} mm",
+                        f.roller_radius_mm
+                    ),
+                ));
+            }
+            check(
+                "follower.rolling_resistance",
+                rolling_resistance_mm,
+                Range::NonNegative,
+                "mm",
+            )?;
+            let mu_f = f.friction_coefficient();
+            if mu_f >= MAX_FRICTION {
+                return Err(invalid(
+                    "follower.pin_friction",
+                    format!("an effective contact coefficient of {mu_f:.4}"),
+                    format!("an effective coefficient below {MAX_FRICTION} (pin_friction * pin_radius / roller_radius + rolling_resistance / roller_radius)"),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+fn validate_material(key: &str, m: &Material) -> Result<(), SpecError> {
+    check(
+        &format!("{key}.youngs_modulus"),
+        m.youngs_modulus_mpa,
+        Range::Positive,
+        "MPa",
+    )?;
+    check(
+        &format!("{key}.poisson_ratio"),
+        m.poisson_ratio,
+        Range::Open(-1.0, 0.5),
+        "",
+    )?;
+    check(
+        &format!("{key}.yield_strength"),
+        m.yield_strength_mpa,
+        Range::Positive,
+        "MPa",
+    )
+}
+
+fn validate_part(p: &PartSpec) -> Result<(), SpecError> {
+    check("part.thickness", p.thickness_mm, Range::Positive, "mm")?;
+    check(
+        "part.roller_width",
+        p.roller_width_mm,
+        Range::Positive,
+        "mm",
+    )?;
+    validate_material("part.cam_material", &p.cam_material)?;
+    validate_material("part.roller_material", &p.roller_material)?;
+    check("part.lead_in", p.lead_in_mm, Range::NonNegative, "mm")?;
+    check("part.run_out", p.run_out_mm, Range::NonNegative, "mm")?;
+    check("part.web", p.web_mm, Range::Positive, "mm")?;
+    for (i, h) in p.holes.iter().enumerate() {
+        check(&format!("part.holes[{i}].x"), h.x_mm, Range::Any, "mm")?;
+        check(&format!("part.holes[{i}].y"), h.y_mm, Range::Any, "mm")?;
+        check(
+            &format!("part.holes[{i}].diameter"),
+            h.diameter_mm,
+            Range::Positive,
+            "mm",
+        )?;
+    }
+    Ok(())
+}
+
+fn validate_machining(m: &MachiningSpec, part: &PartSpec) -> Result<(), SpecError> {
+    check(
+        "machining.tool_diameter",
+        m.tool_diameter_mm,
+        Range::Positive,
+        "mm",
+    )?;
+    check(
+        "machining.spindle_rpm",
+        m.spindle_rpm,
+        Range::Open(0.0, 200_000.0),
+        "rpm",
+    )?;
+    check(
+        "machining.feed",
+        m.feed_mm_per_min,
+        Range::Positive,
+        "mm/min",
+    )?;
+    check(
+        "machining.plunge_feed",
+        m.plunge_feed_mm_per_min,
+        Range::Positive,
+        "mm/min",
+    )?;
+    check(
+        "machining.depth_per_pass",
+        m.depth_per_pass_mm,
+        Range::Positive,
+        "mm",
+    )?;
+    // A pass deeper than the cutter diameter overloads an end mill slotting full width.
+    if m.depth_per_pass_mm > m.tool_diameter_mm {
+        return Err(invalid(
+            "machining.depth_per_pass",
+            found_value(m.depth_per_pass_mm, "mm"),
+            format!(
+                "at most the tool diameter, {} mm (full-width slotting)",
+                m.tool_diameter_mm
+            ),
+        ));
+    }
+    check(
+        "machining.stock_allowance",
+        m.stock_allowance_mm,
+        Range::NonNegative,
+        "mm",
+    )?;
+    check("machining.safe_z", m.safe_z_mm, Range::Any, "mm")?;
+    check("machining.stock_top_z", m.stock_top_z_mm, Range::Any, "mm")?;
+    if m.safe_z_mm <= m.stock_top_z_mm {
+        return Err(invalid(
+            "machining.safe_z",
+            found_value(m.safe_z_mm, "mm"),
+            format!(
+                "a height above machining.stock_top_z = {} mm",
+                m.stock_top_z_mm
+            ),
+        ));
+    }
+    check(
+        "machining.breakthrough",
+        m.breakthrough_mm,
+        Range::NonNegative,
+        "mm",
+    )?;
+    check(
+        "machining.tolerance",
+        m.tolerance_mm,
+        Range::Closed(1e-5, 0.5),
+        "mm",
+    )?;
+    check(
+        "machining.lead_in_radius",
+        m.lead_in_radius_mm,
+        Range::Positive,
+        "mm",
+    )?;
+    if m.tabs > MAX_TABS {
+        return Err(invalid(
+            "machining.tabs",
+            m.tabs.to_string(),
+            format!("a number of tabs from 0 to {MAX_TABS}"),
+        ));
+    }
+    check("machining.tab_width", m.tab_width_mm, Range::Positive, "mm")?;
+    check(
+        "machining.tab_height",
+        m.tab_height_mm,
+        Range::Positive,
+        "mm",
+    )?;
+    // Tab height matters only when tabs are left.
+    if m.tabs > 0 && m.tab_height_mm >= part.thickness_mm {
+        return Err(invalid(
+            "machining.tab_height",
+            found_value(m.tab_height_mm, "mm"),
+            format!("less than part.thickness = {} mm", part.thickness_mm),
+        ));
+    }
+    Ok(())
+}
+
+fn validate_checks(c: &ChecksSpec) -> Result<(), SpecError> {
+    check(
+        "checks.max_pressure_angle",
+        c.max_pressure_angle_deg,
+        Range::Open(0.0, 90.0),
+        "deg",
+    )?;
+    check(
+        "checks.min_locking_margin",
+        c.min_locking_margin_deg,
+        Range::HalfOpen(0.0, 45.0),
+        "deg",
+    )?;
+    check(
+        "checks.max_contact_stress",
+        c.max_contact_stress_mpa,
+        Range::Positive,
+        "MPa",
+    )
+}
+
+fn validate_output(o: &OutputSpec) -> Result<(), SpecError> {
+    check(
+        "output.chord_tolerance",
+        o.chord_tolerance_mm,
+        Range::Closed(1e-5, 0.1),
+        "mm",
+    )?;
+    check(
+        "output.fit_tolerance",
+        o.fit_tolerance_mm,
+        Range::Closed(1e-5, 0.1),
+        "mm",
+    )?;
+    check(
+        "output.stl_tolerance",
+        o.stl_tolerance_mm,
+        Range::Closed(1e-4, 1.0),
+        "mm",
+    )?;
+    if o.chord_tolerance_mm >= o.stl_tolerance_mm {
+        return Err(invalid(
+            "output.chord_tolerance",
+            format!(
+                "{} mm with output.stl_tolerance = {} mm",
+                o.chord_tolerance_mm, o.stl_tolerance_mm
+            ),
+            "a chord tolerance smaller than the STL tolerance (the mesh is decimated from the samples)".into(),
+        ));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn paper() -> SpecBuilder {
+        Spec::builder(
+            LawSpec::Targets(LawTargets {
+                fmax_n: 200.0,
+                fmin_n: 5.0,
+                xmax_mm: 20.0,
+                l0_mm: 5.0,
+                c0: 0.2,
+                delta0_mm: 1.0,
+            }),
+            Follower::new(5.0, 3.0),
+        )
+    }
+
+    #[test]
+    fn builder_takes_the_documented_defaults() {
+        let s = paper().build().unwrap();
+        assert_eq!(s.name, "design");
+        assert_eq!(s.part.thickness_mm, 10.0);
+        assert_eq!(s.part.roller_width_mm, 10.0);
+        assert_eq!(s.machining.tool_diameter_mm, 6.0);
+        assert_eq!(s.checks.max_pressure_angle_deg, 60.0);
+        assert!((s.checks.max_contact_stress_mpa - 1.67 * 276.0).abs() < 1e-9);
+        assert_eq!(s.output.chord_tolerance_mm, 1e-3);
+    }
+
+    #[test]
+    fn contact_limit_follows_the_materials_unless_given() {
+        let brass = Material::preset("brass-360").unwrap();
+        let part = PartSpec {
+            cam_material: brass,
+            ..PartSpec::default()
+        };
+        let s = paper().part(part.clone()).build().unwrap();
+        assert!((s.checks.max_contact_stress_mpa - 1.67 * 310.0).abs() < 1e-9);
+        let given = ChecksSpec {
+            max_contact_stress_mpa: 100.0,
+            ..ChecksSpec::default()
+        };
+        let s = paper().part(part).checks(given).build().unwrap();
+        assert_eq!(s.checks.max_contact_stress_mpa, 100.0);
+    }
+
+    #[test]
+    fn every_section_rule_names_its_key() {
+        let key = |b: SpecBuilder| b.build().unwrap_err().key().map(str::to_string);
+        let part = |p: PartSpec| paper().part(p);
+        assert_eq!(key(paper().name("")).as_deref(), Some("name"));
+        assert_eq!(
+            key(part(PartSpec::default().with_thickness(f64::NAN))).as_deref(),
+            Some("part.thickness")
+        );
+        let pin = Follower::new(5.0, 3.0).with_friction(FrictionSource::Pin {
+            pin_friction: 0.1,
+            pin_radius_mm: 4.0,
+            rolling_resistance_mm: 0.0,
+        });
+        let b = Spec::builder(paper().spec.law.clone(), pin);
+        assert_eq!(key(b).as_deref(), Some("follower.pin_radius"));
+        let m = MachiningSpec {
+            depth_per_pass_mm: 7.0,
+            ..MachiningSpec::default()
+        };
+        assert_eq!(
+            key(paper().machining(m)).as_deref(),
+            Some("machining.depth_per_pass")
+        );
+        let m = MachiningSpec {
+            tabs: 17,
+            ..MachiningSpec::default()
+        };
+        assert_eq!(key(paper().machining(m)).as_deref(), Some("machining.tabs"));
+        let o = OutputSpec {
+            chord_tolerance_mm: 0.05,
+            ..OutputSpec::default()
+        };
+        assert_eq!(
+            key(paper().output(o)).as_deref(),
+            Some("output.chord_tolerance")
+        );
+    }
+
+    #[test]
+    fn thickness_carries_a_roller_as_wide_as_the_plate() {
+        let p = PartSpec::default().with_thickness(12.0);
+        assert_eq!(p.roller_width_mm, 12.0);
+        let narrow = PartSpec {
+            roller_width_mm: 4.0,
+            ..PartSpec::default()
+        }
+        .with_thickness(12.0);
+        assert_eq!(narrow.roller_width_mm, 4.0);
+        assert_eq!(narrow.contact_length_mm(), 4.0);
+    }
+}

@@ -1,0 +1,367 @@
+//! What a design looks like to a person: the text summary, the force and profile plots, the
+//! tool-path plot and `profile.csv`.
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use super::plot::{self, Panel, Series};
+use crate::cam::forces::RodForce;
+use crate::design::Design;
+use crate::outputs::DesignSummary;
+use crate::part::Part;
+use crate::toolpath::{self, Pass};
+
+/// The human-readable report of a design run.
+pub fn format_design(s: &DesignSummary, written: &[PathBuf]) -> String {
+    let mut o = String::new();
+    let _ = writeln!(o, "camspring design '{}'", s.name);
+    let l = &s.law;
+    match l.alpha {
+        Some(a) => {
+            let _ = writeln!(
+                o,
+                "  law      F = {:.7} N * exp({:.7} /mm * x) + {:.7} N   (alpha = {:.10})",
+                l.mu_n, l.k2_per_mm, l.f0_n, a
+            );
+        }
+        None => {
+            let _ = writeln!(
+                o,
+                "  law      F = {:.7} N * exp({:.7} /mm * x) + {:.7} N   (given)",
+                l.mu_n, l.k2_per_mm, l.f0_n
+            );
+        }
+    }
+    if let Some(r) = &l.residuals {
+        let _ = writeln!(
+            o,
+            "           residuals: F(L0) {:.1e}, F(Xmax) {:.1e}, C0 {:.1e} (relative)",
+            r.force_at_l0, r.force_at_xmax, r.c0
+        );
+    }
+    let f = &s.follower;
+    let _ = writeln!(
+        o,
+        "  follower {} x roller r = {:.4} mm, springs {:.4} N/mm ({}), k_eff = {:.4} N/mm, preload {:.4} mm, friction {:.4} ({} correction)",
+        f.count, f.roller_radius_mm, f.spring_rate_n_per_mm, f.spring, f.k_eff_n_per_mm, f.preload_mm, f.friction_coefficient, f.friction_correction
+    );
+    let p = &s.profile;
+    let _ = writeln!(
+        o,
+        "  profile  lift {:.4} mm over {} mm, max pressure angle {:.2} deg at x = {:.3} mm, {} samples",
+        p.lift_mm, p.xmax_mm, p.max_pressure_angle_deg, p.max_pressure_angle_at_x_mm, p.samples
+    );
+    let _ = writeln!(
+        o,
+        "  force    at Xmax: loading {} N, unloading {:.3} N",
+        p.loading_force_at_xmax_n
+            .map_or("jammed".to_string(), |v| format!("{v:.3}")),
+        p.unloading_force_at_xmax_n
+    );
+    match (&s.part, &s.part_refused) {
+        (Some(part), _) => {
+            let _ = writeln!(
+                o,
+                "  part     area {:.4} mm2 x {:.3} mm = {:.3} mm3, box {:.3} x {:.3} mm, cam B-spline {} spans within {:.1e} mm, STL {} triangles",
+                part.area_mm2,
+                part.thickness_mm,
+                part.volume_mm3,
+                part.bounding_box_max_mm[0] - part.bounding_box_min_mm[0],
+                part.bounding_box_max_mm[1] - part.bounding_box_min_mm[1],
+                part.cam_edge_spans.iter().sum::<usize>(),
+                part.cam_edge_fit_deviation_mm,
+                part.stl_triangles
+            );
+        }
+        (None, Some(why)) => {
+            let _ = writeln!(o, "  part     REFUSED: {why}");
+        }
+        (None, None) => {}
+    }
+    match (&s.gcode, &s.gcode_refused) {
+        (Some(g), _) => {
+            let _ = writeln!(
+                o,
+                "  gcode    {} blocks ({:?}, {}), {} rough levels of {:.3} mm + finish, fit within {:.1e} mm (budget {:.1e}), about {:.1} min",
+                g.blocks,
+                g.dialect,
+                if g.arcs { "arcs" } else { "lines only" },
+                g.toolpath.rough_levels,
+                g.toolpath.depth_step_mm,
+                g.toolpath.max_fit_deviation_mm,
+                g.toolpath.fit_budget_mm,
+                g.toolpath.estimated_minutes
+            );
+        }
+        (None, Some(why)) => {
+            let _ = writeln!(o, "  gcode    REFUSED: {why}");
+        }
+        (None, None) => {}
+    }
+    let _ = writeln!(o, "  checks");
+    for c in &s.checks {
+        let _ = writeln!(
+            o,
+            "    {:<5} {:<15} {}",
+            c.status.as_str().to_uppercase(),
+            c.name,
+            c.message
+        );
+        if let Some(a) = &c.advice {
+            let _ = writeln!(o, "          advice: {a}");
+        }
+    }
+    let _ = writeln!(o, "  status   {}", s.status.as_str().to_uppercase());
+    let _ = writeln!(o, "  wrote");
+    for w in written {
+        let _ = writeln!(o, "    {}", w.display());
+    }
+    o
+}
+
+/// The header of `profile.csv`.
+pub const PROFILE_CSV_HEADER: [&str; 9] = [
+    "x_mm",
+    "pitch_y_mm",
+    "surface_x_mm",
+    "surface_y_mm",
+    "pressure_angle_deg",
+    "force_design_n",
+    "force_loading_n",
+    "force_unloading_n",
+    "stiffness_n_per_mm",
+];
+
+/// `profile.csv`: one row per pitch sample.
+pub fn profile_csv(design: &Design) -> Result<Vec<u8>, csv::Error> {
+    let mut w = csv::Writer::from_writer(Vec::new());
+    w.write_record(PROFILE_CSV_HEADER)?;
+    for ((s, p), f) in design
+        .pitch_curve
+        .samples
+        .iter()
+        .zip(&design.cam_surface.points)
+        .zip(&design.forces)
+    {
+        let num = |v: f64| format!("{v:.9}");
+        w.write_record([
+            num(s.x_mm),
+            num(s.y_mm),
+            num(p.x_mm),
+            num(p.y_mm),
+            num(s.theta_rad.to_degrees()),
+            num(f.design_n),
+            f.loading_n.map(num).unwrap_or_default(),
+            num(f.unloading_n),
+            num(f.stiffness_n_per_mm),
+        ])?;
+    }
+    w.into_inner().map_err(|e| csv::Error::from(e.into_error()))
+}
+
+/// `force.svg`: force against deflection (design, loading, unloading) and stiffness against force.
+pub fn force_svg(design: &Design) -> String {
+    let law = &design.law.law;
+    let pts = |f: &dyn Fn(&RodForce) -> Option<(f64, f64)>| {
+        design.forces.iter().filter_map(f).collect::<Vec<_>>()
+    };
+    let force = Panel {
+        title: "Rod force".into(),
+        x_label: "deflection x (mm)".into(),
+        y_label: "force F (N)".into(),
+        series: vec![
+            Series {
+                label: "designed law".into(),
+                points: pts(&|f| Some((f.x_mm, f.design_n))),
+                color: "#000",
+                dashed: false,
+                dots: false,
+            },
+            Series {
+                label: "predicted loading".into(),
+                points: pts(&|f| f.loading_n.map(|l| (f.x_mm, l))),
+                color: "#c62828",
+                dashed: true,
+                dots: false,
+            },
+            Series {
+                label: "predicted unloading".into(),
+                points: pts(&|f| Some((f.x_mm, f.unloading_n))),
+                color: "#1565c0",
+                dashed: true,
+                dots: false,
+            },
+        ],
+        ..Panel::default()
+    };
+    // Loading stiffness from central differences of the predicted loading force.
+    let loading_stiffness: Vec<(f64, f64)> = design
+        .forces
+        .windows(3)
+        .filter_map(|w| match (w[0].loading_n, w[1].loading_n, w[2].loading_n) {
+            (Some(a), Some(b), Some(c)) if w[2].x_mm > w[0].x_mm => {
+                Some((b, (c - a) / (w[2].x_mm - w[0].x_mm)))
+            }
+            _ => None,
+        })
+        .collect();
+    let stiffness = Panel {
+        title: "Stiffness against force".into(),
+        x_label: "force F (N)".into(),
+        y_label: "stiffness dF/dx (N/mm)".into(),
+        series: vec![
+            Series {
+                label: format!(
+                    "designed: {:.4}/mm x (F - {:.3} N)",
+                    law.k2_per_mm, law.f0_n
+                ),
+                points: pts(&|f| Some((f.design_n, f.stiffness_n_per_mm))),
+                color: "#000",
+                dashed: false,
+                dots: false,
+            },
+            Series {
+                label: "predicted loading".into(),
+                points: loading_stiffness,
+                color: "#c62828",
+                dashed: true,
+                dots: false,
+            },
+        ],
+        ..Panel::default()
+    };
+    plot::document(&[force, stiffness], 560.0, 420.0).to_string()
+}
+
+/// `profile.svg`: pitch curve, cam surface and the roller at a few positions, to scale.
+pub fn profile_svg(design: &Design) -> String {
+    let samples = &design.pitch_curve.samples;
+    let r = design.spec.follower.roller_radius_mm;
+    let circles = (0..=4)
+        .map(|i| {
+            let idx = (samples.len() - 1) * i / 4;
+            (samples[idx].x_mm, samples[idx].y_mm, r)
+        })
+        .filter(|c| c.2 > 0.0)
+        .collect();
+    let panel = Panel {
+        title: format!(
+            "Cam profile of '{}' (roller radius {} mm)",
+            design.spec.name, r
+        ),
+        x_label: "cam x (mm)".into(),
+        y_label: "follower lift y (mm)".into(),
+        series: vec![
+            Series {
+                label: "pitch curve (roller centre)".into(),
+                points: samples.iter().map(|s| (s.x_mm, s.y_mm)).collect(),
+                color: "#1565c0",
+                dashed: true,
+                dots: false,
+            },
+            Series {
+                label: "cam surface".into(),
+                points: design
+                    .cam_surface
+                    .points
+                    .iter()
+                    .map(|p| (p.x_mm, p.y_mm))
+                    .collect(),
+                color: "#000",
+                dashed: false,
+                dots: false,
+            },
+        ],
+        circles,
+        equal_aspect: true,
+        log_axes: false,
+    };
+    plot::document(&[panel], 760.0, 560.0).to_string()
+}
+
+/// `toolpath.svg`: the part outline with the finishing and last roughing passes, to scale.
+pub fn toolpath_svg(design: &Design, part: &Part, passes: &[Pass]) -> String {
+    let mut outline: Vec<(f64, f64)> = part
+        .outline_polygon()
+        .iter()
+        .map(|p| (p[0], p[1]))
+        .collect();
+    if let Some(&first) = outline.first() {
+        outline.push(first);
+    }
+    let mut series = vec![Series {
+        label: "part outline".into(),
+        points: outline,
+        color: "#000",
+        dashed: false,
+        dots: false,
+    }];
+    let deepest_rough = passes
+        .iter()
+        .filter(|p| !p.finishing)
+        .map(|p| p.z_mm)
+        .fold(f64::INFINITY, f64::min);
+    let mut rapids = Vec::new();
+    for p in passes
+        .iter()
+        .filter(|p| p.finishing || p.z_mm == deepest_rough)
+    {
+        let mut pts = vec![(p.entry[0], p.entry[1])];
+        let mut from = p.entry;
+        for mv in &p.moves {
+            pts.extend(
+                toolpath::path::sample_move(from, mv, 12)
+                    .into_iter()
+                    .skip(1)
+                    .map(|q| (q[0], q[1])),
+            );
+            from = mv.to();
+        }
+        rapids.push((from[0], from[1]));
+        rapids.push((p.entry[0], p.entry[1]));
+        let (label, color) = if p.finishing {
+            ("finishing (tool centre)", "#c62828")
+        } else {
+            ("roughing (tool centre)", "#1565c0")
+        };
+        let label = if series.iter().any(|s| s.label == label) {
+            String::new()
+        } else {
+            label.to_string()
+        };
+        series.push(Series {
+            label,
+            points: pts,
+            color,
+            dashed: false,
+            dots: false,
+        });
+    }
+    series.push(Series {
+        label: "rapids".into(),
+        points: rapids,
+        color: "#999",
+        dashed: true,
+        dots: false,
+    });
+    let panel = Panel {
+        title: format!(
+            "Tool path of '{}': {} mm cutter, {} ({} dialect)",
+            design.spec.name,
+            design.spec.machining.tool_diameter_mm,
+            if design.spec.machining.climb {
+                "climb"
+            } else {
+                "conventional"
+            },
+            toolpath::gcode::dialect_name(design.spec.machining.dialect)
+        ),
+        x_label: "x (mm)".into(),
+        y_label: "y (mm)".into(),
+        series,
+        equal_aspect: true,
+        log_axes: false,
+        ..Panel::default()
+    };
+    plot::document(&[panel], 820.0, 640.0).to_string()
+}
