@@ -187,14 +187,7 @@ mod tests {
     use super::*;
 
     fn paper() -> LawTargets {
-        LawTargets {
-            fmax_n: 200.0,
-            fmin_n: 5.0,
-            xmax_mm: 20.0,
-            l0_mm: 5.0,
-            c0: 0.2,
-            delta0_mm: 1.0,
-        }
+        LawTargets::PAPER_EXAMPLE
     }
 
     #[test]

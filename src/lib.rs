@@ -15,7 +15,7 @@
 //! | --- | --- | --- |
 //! | model | [`model`] (Spec and its sections, validation), [`units`], [`geom`] | yes |
 //! | law | [`law`] (solving the law) | yes |
-//! | synthesis, estimation | [`cam`], [`estimate`] | yes |
+//! | synthesis, estimation | [`cam`], [`mod@estimate`] | yes |
 //! | design | [`mod@design`] | yes |
 //! | part, toolpath | [`part`], [`toolpath`] | yes |
 //! | plan, sweep, verdict | [`outputs`], [`sweep`], [`verdict`] | yes |

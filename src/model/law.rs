@@ -49,6 +49,16 @@ pub struct LawTargets {
 }
 
 impl LawTargets {
+    /// The paper's example: 200 N at 20 mm, 5 N at L0 = 5 mm, C0 = 0.2 for delta0 = 1 mm.
+    pub const PAPER_EXAMPLE: LawTargets = LawTargets {
+        fmax_n: 200.0,
+        fmin_n: 5.0,
+        xmax_mm: 20.0,
+        l0_mm: 5.0,
+        c0: 0.2,
+        delta0_mm: 1.0,
+    };
+
     /// Fr = Fmax / Fmin.
     pub fn force_ratio(&self) -> f64 {
         self.fmax_n / self.fmin_n

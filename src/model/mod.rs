@@ -654,14 +654,7 @@ mod tests {
 
     fn paper() -> SpecBuilder {
         Spec::builder(
-            LawSpec::Targets(LawTargets {
-                fmax_n: 200.0,
-                fmin_n: 5.0,
-                xmax_mm: 20.0,
-                l0_mm: 5.0,
-                c0: 0.2,
-                delta0_mm: 1.0,
-            }),
+            LawSpec::Targets(LawTargets::PAPER_EXAMPLE),
             Follower::new(5.0, 3.0),
         )
     }

@@ -40,7 +40,7 @@ fn chord_deviation(a: P2, b: P2, p: P2) -> f64 {
 /// Thins exact, densely sampled points (chord error `sample_tol`) to a polyline whose chords
 /// stay within `tol`: every dropped point lies within `tol - sample_tol` of its chord, and the
 /// true curve between samples lies within `sample_tol` of the dropped points' polyline.
-pub fn thin(points: &[P2], tol: f64, sample_tol: f64) -> Vec<P2> {
+pub(crate) fn thin(points: &[P2], tol: f64, sample_tol: f64) -> Vec<P2> {
     let budget = (tol - sample_tol).max(0.0);
     let mut kept = vec![points[0]];
     let mut i = 0;
@@ -60,7 +60,7 @@ pub fn thin(points: &[P2], tol: f64, sample_tol: f64) -> Vec<P2> {
 }
 
 /// Number of sides of an inscribed polygon whose sagitta on a circle of radius r is <= tol.
-pub fn circle_sides(r: f64, tol: f64) -> usize {
+pub(crate) fn circle_sides(r: f64, tol: f64) -> usize {
     let half = (1.0 - (tol / r).min(1.0)).acos();
     ((std::f64::consts::PI / half).ceil() as usize).max(8)
 }

@@ -21,7 +21,7 @@ border-radius:.3em;font-weight:bold}figure{margin:1em 0}figure svg{max-width:100
 border:1px solid #eee}nav a{margin-right:1em}code{background:#f4f4f4;padding:0 .2em}";
 
 /// Escapes text for HTML.
-pub fn escape(text: &str) -> String {
+pub(crate) fn escape(text: &str) -> String {
     text.replace('&', "&amp;")
         .replace('<', "&lt;")
         .replace('>', "&gt;")

@@ -36,7 +36,7 @@ pub const GRBL_MAX_LINE: usize = 70;
 
 /// Formats a coordinate: fixed decimals, trailing zeros dropped, the decimal point kept
 /// ("10." not "10", which Fanuc would read in least input increments).
-pub fn num(v: f64, decimals: usize) -> String {
+pub(crate) fn num(v: f64, decimals: usize) -> String {
     let mut s = format!("{:.*}", decimals, v);
     if s.contains('.') {
         while s.ends_with('0') {

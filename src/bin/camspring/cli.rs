@@ -199,11 +199,7 @@ pub enum Command {
         #[arg(long)]
         json: bool,
         #[command(flatten)]
-        filter: FilterArgs,
-        #[command(flatten)]
-        sensors: Sensors,
-        #[command(flatten)]
-        columns: Columns,
+        calibration: CalibrationArgs,
     },
     /// Check a built spring's calibration log against its design: one verdict.
     ///
@@ -228,11 +224,7 @@ pub enum Command {
         #[arg(long)]
         json: bool,
         #[command(flatten)]
-        filter: FilterArgs,
-        #[command(flatten)]
-        sensors: Sensors,
-        #[command(flatten)]
-        columns: Columns,
+        calibration: CalibrationArgs,
     },
     /// Print a shell completion script.
     ///
@@ -297,6 +289,17 @@ impl From<DiscretizationArg> for Discretization {
             DiscretizationArg::Euler => Discretization::Euler,
         }
     }
+}
+
+/// What estimation and validation read: the filter, the sensors and the log's columns.
+#[derive(clap::Args, Debug)]
+pub struct CalibrationArgs {
+    #[command(flatten)]
+    pub filter: FilterArgs,
+    #[command(flatten)]
+    pub sensors: Sensors,
+    #[command(flatten)]
+    pub columns: Columns,
 }
 
 /// Sensor noise and filter window for identification and estimation.

@@ -31,7 +31,7 @@ use camspring::spec::STARTER_SPEC_TOML;
 use camspring::units::Dimension;
 use camspring::{Error, EstimateOptions, SensorNoise};
 
-use cli::{Cli, Columns, Command, FilterArgs, Sensors};
+use cli::{CalibrationArgs, Cli, Columns, Command, FilterArgs, Sensors};
 
 /// What a command has to say: its text, its JSON (already encoded, in the field order of its
 /// type) and its exit code.
@@ -147,6 +147,15 @@ fn filter_options(f: &FilterArgs, s: &Sensors) -> Result<EstimateOptions, Error>
             .collect::<Result<_, _>>()?;
     opts.r_position_mm2 = f.r;
     app::with_init(opts, &f.init)
+}
+
+/// The column map, sampling tolerance and estimation options of `estimate` and `validate`.
+fn calibration_options(c: &CalibrationArgs) -> Result<(ColumnMap, f64, EstimateOptions), Error> {
+    Ok((
+        columns(&c.columns)?,
+        c.columns.sampling_tolerance,
+        filter_options(&c.filter, &c.sensors)?,
+    ))
 }
 
 fn columns(c: &Columns) -> Result<ColumnMap, Error> {
@@ -353,15 +362,11 @@ fn main() -> ExitCode {
             log,
             out,
             json,
-            filter,
-            sensors: s,
-            columns: c,
+            calibration,
         } => emit(
             (|| {
-                let map = columns(&c)?;
-                let opts = filter_options(&filter, &s)?;
-                let (est, path) =
-                    run_estimate(&log, &map, c.sampling_tolerance, &opts, out.as_deref())?;
+                let (map, tol, opts) = calibration_options(&calibration)?;
+                let (est, path) = run_estimate(&log, &map, tol, &opts, out.as_deref())?;
                 Ok(Report::new(
                     format!(
                         "{}  time series: {}\n",
@@ -379,23 +384,20 @@ fn main() -> ExitCode {
             tolerance,
             svg,
             json,
-            filter,
-            sensors: s,
-            columns: c,
+            calibration,
         } => emit(
             (|| {
-                if !matches!(filter.init, InitSource::Identify) {
+                if !matches!(calibration.filter.init, InitSource::Identify) {
                     return Err(Error::Argument(
                         "validate: --init must be identify (the design is what is checked)".into(),
                     ));
                 }
-                let map = columns(&c)?;
-                let opts = filter_options(&filter, &s)?;
+                let (map, tol, opts) = calibration_options(&calibration)?;
                 let (v, path) = run_validate(
                     Some(&spec),
                     &log,
                     &map,
-                    c.sampling_tolerance,
+                    tol,
                     &opts,
                     tolerance,
                     svg.as_deref(),
