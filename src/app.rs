@@ -140,7 +140,7 @@ pub fn run_simulate(spec_path: Option<&Path>, opts: &SimulateOptions) -> Result<
 
 /// A progress bar on stderr for `len` units, only on a terminal, never when `CI` is set, and
 /// only for work of more than `threshold` units.
-pub fn progress_bar(len: u64, threshold: u64, template: &str) -> Option<indicatif::ProgressBar> {
+fn progress_bar(len: u64, threshold: u64, template: &str) -> Option<indicatif::ProgressBar> {
     use std::io::IsTerminal;
     let show =
         std::io::stderr().is_terminal() && std::env::var_os("CI").is_none() && len > threshold;

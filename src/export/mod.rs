@@ -69,49 +69,60 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), ExportError> {
     Ok(())
 }
 
+/// The bytes of one output the plan lists, by its file name.
+fn render_file(design: &Design, outputs: &Outputs, name: &str) -> Result<Vec<u8>, ExportError> {
+    let spec = &design.spec;
+    let part = || {
+        outputs
+            .part
+            .as_ref()
+            .ok_or_else(|| encode("the part files")("the plan holds no part".into()))
+    };
+    let program = || {
+        outputs
+            .program
+            .as_ref()
+            .ok_or_else(|| encode("cam.ngc")("the plan holds no program".into()))
+    };
+    Ok(match name {
+        "design.json" => serde_json::to_vec_pretty(&outputs.summary)
+            .map_err(|e| encode("design.json")(e.to_string()))?,
+        "report.html" => {
+            let force = render::design::force_svg(design);
+            let profile = render::design::profile_svg(design);
+            render::html::report_html(design, &outputs.summary, &force, &profile).into_bytes()
+        }
+        "profile.csv" => {
+            render::design::profile_csv(design).map_err(|e| encode("profile.csv")(e.to_string()))?
+        }
+        "force.svg" => render::design::force_svg(design).into_bytes(),
+        "profile.svg" => render::design::profile_svg(design).into_bytes(),
+        "cam.step" => step::step_text(&part()?.part, &spec.name)
+            .map_err(|e| encode("cam.step")(e.to_string()))?
+            .into_bytes(),
+        "cam.stl" => stl::stl_bytes(&part()?.mesh),
+        "cam.dxf" => dxf::dxf_bytes(&part()?.part).map_err(encode("cam.dxf"))?,
+        "drawing.svg" => drawing::drawing_svg(design, &part()?.part).into_bytes(),
+        "cam.ngc" => program()?.text.clone().into_bytes(),
+        "toolpath.svg" => {
+            render::design::toolpath_svg(design, &part()?.part, &program()?.passes).into_bytes()
+        }
+        other => return Err(encode("an output")(format!("no writer for \"{other}\""))),
+    })
+}
+
 /// The bytes of every file the plan lists, in writing order: `design.json` last, so that its
 /// presence with this run's content marks a complete set.
 pub fn design_files(
     design: &Design,
     outputs: &Outputs,
-) -> Result<Vec<(&'static str, Vec<u8>)>, ExportError> {
-    let summary = &outputs.summary;
-    let json =
-        serde_json::to_vec_pretty(summary).map_err(|e| encode("design.json")(e.to_string()))?;
-    let force = render::design::force_svg(design);
-    let profile = render::design::profile_svg(design);
-    let report = render::html::report_html(design, summary, &force, &profile);
-    let csv =
-        render::design::profile_csv(design).map_err(|e| encode("profile.csv")(e.to_string()))?;
-    let mut files: Vec<(&'static str, Vec<u8>)> = vec![
-        ("profile.csv", csv),
-        ("force.svg", force.into_bytes()),
-        ("profile.svg", profile.into_bytes()),
-    ];
-    if let Some(p) = &outputs.part {
-        let spec = &design.spec;
-        let step =
-            step::step_text(&p.part, &spec.name).map_err(|e| encode("cam.step")(e.to_string()))?;
-        files.push(("cam.step", step.into_bytes()));
-        files.push(("cam.stl", stl::stl_bytes(&p.mesh)));
-        files.push((
-            "cam.dxf",
-            dxf::dxf_bytes(&p.part).map_err(encode("cam.dxf"))?,
-        ));
-        files.push((
-            "drawing.svg",
-            drawing::drawing_svg(design, &p.part).into_bytes(),
-        ));
-        if let Some(program) = &outputs.program {
-            files.push(("cam.ngc", program.text.clone().into_bytes()));
-            let svg = render::design::toolpath_svg(design, &p.part, &program.passes);
-            files.push(("toolpath.svg", svg.into_bytes()));
-        }
-    }
-    files.push(("report.html", report.into_bytes()));
-    files.push(("design.json", json));
-    debug_assert_eq!(files.len(), summary.outputs.len());
-    Ok(files)
+) -> Result<Vec<(String, Vec<u8>)>, ExportError> {
+    let mut names: Vec<&str> = outputs.summary.outputs.iter().map(String::as_str).collect();
+    names.sort_by_key(|n| *n == "design.json");
+    names
+        .into_iter()
+        .map(|n| Ok((n.to_string(), render_file(design, outputs, n)?)))
+        .collect()
 }
 
 /// Writes the planned outputs of a design into `dir`; returns the paths written.
@@ -122,7 +133,7 @@ pub fn write_design(
 ) -> Result<Vec<PathBuf>, ExportError> {
     let mut written = Vec::new();
     for (name, bytes) in design_files(design, outputs)? {
-        let path = dir.join(name);
+        let path = dir.join(&name);
         write_atomic(&path, &bytes)?;
         written.push(path);
     }
