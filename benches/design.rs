@@ -48,18 +48,18 @@ fn benches(c: &mut Criterion) {
     });
     let part = build(&d).unwrap();
     c.bench_function("step_export (solid + STEP text)", |b| {
-        b.iter(|| step::step_text(black_box(&part), "paper").unwrap())
+        b.iter(|| step::step_text(black_box(&part), "paper", "0").unwrap())
     });
     c.bench_function("stl_export (5 um, mesh + bytes)", |b| {
         b.iter(|| {
             let rings = mesh::rings(black_box(&part), 5e-3, 1e-3);
-            stl::stl_bytes(&mesh::mesh(&rings, part.thickness_mm).unwrap())
+            stl::stl_bytes(&mesh::mesh(&rings, part.thickness_mm).unwrap(), "0")
         })
     });
     c.bench_function("dxf_and_drawing_export", |b| {
         b.iter(|| {
             (
-                dxf::dxf_bytes(black_box(&part)).unwrap(),
+                dxf::dxf_bytes(black_box(&part), "0").unwrap(),
                 drawing::drawing_svg(&d, &part),
             )
         })

@@ -29,6 +29,21 @@ pub const PART_OUTPUTS: [&str; 4] = ["cam.step", "cam.stl", "cam.dxf", "drawing.
 /// The machining files, written when the part can be milled with the cutter.
 pub const GCODE_OUTPUTS: [&str; 2] = ["cam.ngc", "toolpath.svg"];
 
+/// Every file a design run can make.
+pub const ALL_OUTPUTS: [&str; 11] = [
+    "design.json",
+    "report.html",
+    "profile.csv",
+    "force.svg",
+    "profile.svg",
+    "cam.step",
+    "cam.stl",
+    "cam.dxf",
+    "drawing.svg",
+    "cam.ngc",
+    "toolpath.svg",
+];
+
 /// Why no plan could be made (as opposed to a part or program refused with a reason).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum PlanError {
@@ -293,6 +308,9 @@ pub struct DesignSummary {
     pub camspring_version: &'static str,
     /// Design name.
     pub name: String,
+    /// The run's identity ([`Spec::run_id`]), also in the header of every output file that
+    /// has one.
+    pub run_id: String,
     /// Overall status: the worst check.
     pub status: Status,
     /// The spec as understood, in default units.
@@ -347,6 +365,7 @@ pub fn summarize(design: &Design, outputs: &[&str]) -> DesignSummary {
     DesignSummary {
         camspring_version: env!("CARGO_PKG_VERSION"),
         name: spec.name.clone(),
+        run_id: spec.run_id(),
         status: design.status(),
         spec: spec.clone(),
         law: LawSummary {
@@ -400,5 +419,27 @@ pub fn summarize(design: &Design, outputs: &[&str]) -> DesignSummary {
         gcode: None,
         gcode_refused: None,
         outputs: outputs.iter().map(|s| s.to_string()).collect(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_planned_name_is_one_of_all_outputs_and_each_once() {
+        let planned: Vec<&str> = DESIGN_OUTPUTS
+            .iter()
+            .chain(&PART_OUTPUTS)
+            .chain(&GCODE_OUTPUTS)
+            .copied()
+            .collect();
+        let mut sorted = planned.clone();
+        sorted.sort();
+        sorted.dedup();
+        assert_eq!(sorted.len(), planned.len());
+        let mut all = ALL_OUTPUTS.to_vec();
+        all.sort();
+        assert_eq!(sorted, all);
     }
 }

@@ -59,7 +59,7 @@ tabs = {tabs}
         return;
     };
     if let Ok(part) = camspring::part::build(&design) {
-        let _ = camspring::export::step::step_text(&part, "fuzz");
+        let _ = camspring::export::step::step_text(&part, "fuzz", "0");
         let _ = camspring::toolpath::passes(&design, &part);
     }
 });

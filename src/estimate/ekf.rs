@@ -279,7 +279,7 @@ impl Ekf {
                 )));
             }
         }
-        if sample % 64 == 0 && self.p.cholesky().is_none() {
+        if sample.is_multiple_of(64) && self.p.cholesky().is_none() {
             return Err(diverged(
                 "the covariance is no longer positive definite".into(),
             ));

@@ -285,7 +285,7 @@ pub fn read_log<R: Read>(
         log.t_s.push(v[0]);
         log.force_n.push(v[1]);
         log.position_mm.push(v[2]);
-        if log.t_s.len() % 65_536 == 0 {
+        if log.t_s.len().is_multiple_of(65_536) {
             progress(record.position().map_or(0, |p| p.byte()));
         }
     }

@@ -17,8 +17,8 @@ fn entity(specific: EntityType, layer: &str) -> Entity {
     e
 }
 
-/// The DXF text of the part outline.
-pub fn dxf_bytes(part: &Part) -> Result<Vec<u8>, String> {
+/// The DXF text of the part outline, starting with a comment that names the run.
+pub fn dxf_bytes(part: &Part, run_id: &str) -> Result<Vec<u8>, String> {
     let mut d = Drawing::new();
     d.header.version = AcadVersion::R2000;
     d.header.default_drawing_units = Units::Millimeters;
@@ -79,5 +79,8 @@ pub fn dxf_bytes(part: &Part) -> Result<Vec<u8>, String> {
     }
     let mut out = Vec::new();
     d.save(&mut out).map_err(|e| e.to_string())?;
-    Ok(out)
+    // A 999 comment group names the run; readers skip comments anywhere in the file.
+    let mut marked = format!("999\ncamspring run {run_id}\n").into_bytes();
+    marked.extend(out);
+    Ok(marked)
 }

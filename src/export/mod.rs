@@ -7,6 +7,7 @@
 
 pub mod drawing;
 pub mod dxf;
+pub mod folder;
 pub mod step;
 pub mod stl;
 
@@ -29,6 +30,24 @@ pub enum ExportError {
         #[source]
         source: std::io::Error,
     },
+    /// Produced by [`write_atomic`] and [`folder::write_set`] for a path that must not be
+    /// written: a device, a pipe or anything else that is not a regular file (or a folder).
+    #[error("cannot write {path}: {why}")]
+    NotWritable {
+        /// The path.
+        path: PathBuf,
+        /// Why not.
+        why: String,
+    },
+    /// Produced by [`folder::write_set`] when another run holds the folder.
+    #[error(
+        "{path} is being written by another camspring run; wait for it to finish (the folder \
+         is locked while a run writes it, so two runs never mix their files)"
+    )]
+    Busy {
+        /// The folder.
+        path: PathBuf,
+    },
     /// Produced by [`write_design`] when an output cannot be encoded.
     #[error("cannot encode {what}: {message}")]
     Encode {
@@ -43,8 +62,62 @@ fn encode(what: &'static str) -> impl Fn(String) -> ExportError {
     move |message| ExportError::Encode { what, message }
 }
 
+/// Temporary files are named `.camspring-PID-*.tmp`.
+const TMP_PREFIX: &str = ".camspring-";
+
+/// Whether the process `pid` still runs (on other systems: assume it does).
+fn alive(pid: u32) -> bool {
+    #[cfg(unix)]
+    {
+        // SAFETY: kill with signal 0 only checks that the process exists.
+        let r = unsafe { libc::kill(pid as libc::pid_t, 0) };
+        r == 0 || std::io::Error::last_os_error().raw_os_error() == Some(libc::EPERM)
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = pid;
+        true
+    }
+}
+
+/// Removes temporary files that killed runs left in `dir` (their process is gone).
+fn remove_stale_temporaries(dir: &Path) {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let name = e.file_name().to_string_lossy().into_owned();
+        let pid = name
+            .strip_prefix(TMP_PREFIX)
+            .filter(|_| name.ends_with(".tmp"))
+            .and_then(|rest| rest.split('-').next())
+            .and_then(|p| p.parse::<u32>().ok());
+        if pid.is_some_and(|p| !alive(p)) {
+            let _ = std::fs::remove_file(e.path());
+        }
+    }
+}
+
+/// Refuses an existing `path` that is not a regular file (a device, a pipe, a folder): writing
+/// there would replace or feed something that is not an output.
+pub fn check_regular(path: &Path) -> Result<(), ExportError> {
+    match std::fs::metadata(path) {
+        Ok(m) if !m.is_file() => Err(ExportError::NotWritable {
+            path: path.to_path_buf(),
+            why: if m.is_dir() {
+                "it is a folder".into()
+            } else {
+                "it is not a regular file (a device, a pipe or a socket); give a file name".into()
+            },
+        }),
+        _ => Ok(()),
+    }
+}
+
 /// Writes `bytes` to `path` atomically (temporary file in the same folder, then rename).
+/// An existing `path` that is not a regular file is refused.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), ExportError> {
+    check_regular(path)?;
     let dir = path
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
@@ -54,8 +127,10 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), ExportError> {
         source,
     };
     std::fs::create_dir_all(dir).map_err(wrap)?;
+    remove_stale_temporaries(dir);
     let mut builder = tempfile::Builder::new();
-    builder.prefix(".camspring-").suffix(".tmp");
+    let prefix = format!("{TMP_PREFIX}{}-", std::process::id());
+    builder.prefix(&prefix).suffix(".tmp");
     #[cfg(unix)]
     {
         // tempfile creates 0600; outputs are ordinary readable files.
@@ -67,6 +142,23 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), ExportError> {
     tmp.as_file().sync_all().map_err(wrap)?;
     tmp.persist(path).map_err(|e| wrap(e.error))?;
     Ok(())
+}
+
+/// Puts the run's identity into an SVG document as a comment right after its root tag.
+fn mark_svg(bytes: Vec<u8>, run_id: &str) -> Vec<u8> {
+    let text = String::from_utf8_lossy(&bytes);
+    match text
+        .find("<svg")
+        .and_then(|i| text[i..].find('>').map(|j| i + j + 1))
+    {
+        Some(at) => format!(
+            "{}\n<!-- camspring run {run_id} -->{}",
+            &text[..at],
+            &text[at..]
+        )
+        .into_bytes(),
+        None => bytes,
+    }
 }
 
 /// The bytes of one output the plan lists, by its file name.
@@ -97,11 +189,13 @@ fn render_file(design: &Design, outputs: &Outputs, name: &str) -> Result<Vec<u8>
         }
         "force.svg" => render::design::force_svg(design).into_bytes(),
         "profile.svg" => render::design::profile_svg(design).into_bytes(),
-        "cam.step" => step::step_text(&part()?.part, &spec.name)
+        "cam.step" => step::step_text(&part()?.part, &spec.name, &outputs.summary.run_id)
             .map_err(|e| encode("cam.step")(e.to_string()))?
             .into_bytes(),
-        "cam.stl" => stl::stl_bytes(&part()?.mesh),
-        "cam.dxf" => dxf::dxf_bytes(&part()?.part).map_err(encode("cam.dxf"))?,
+        "cam.stl" => stl::stl_bytes(&part()?.mesh, &outputs.summary.run_id),
+        "cam.dxf" => {
+            dxf::dxf_bytes(&part()?.part, &outputs.summary.run_id).map_err(encode("cam.dxf"))?
+        }
         "drawing.svg" => drawing::drawing_svg(design, &part()?.part).into_bytes(),
         "cam.ngc" => program()?.text.clone().into_bytes(),
         "toolpath.svg" => {
@@ -121,21 +215,25 @@ pub fn design_files(
     names.sort_by_key(|n| *n == "design.json");
     names
         .into_iter()
-        .map(|n| Ok((n.to_string(), render_file(design, outputs, n)?)))
+        .map(|n| {
+            let mut bytes = render_file(design, outputs, n)?;
+            if n.ends_with(".svg") {
+                bytes = mark_svg(bytes, &outputs.summary.run_id);
+            }
+            Ok((n.to_string(), bytes))
+        })
         .collect()
 }
 
-/// Writes the planned outputs of a design into `dir`; returns the paths written.
+/// Writes the planned outputs of a design as the new content of `dir`, replacing the
+/// previous run as a whole ([`folder::write_set`]): files of the previous run that this run
+/// does not make (a refused part's STEP, a refused program) are gone, the user's own files
+/// stay. Returns the paths written.
 pub fn write_design(
     design: &Design,
     outputs: &Outputs,
     dir: &Path,
 ) -> Result<Vec<PathBuf>, ExportError> {
-    let mut written = Vec::new();
-    for (name, bytes) in design_files(design, outputs)? {
-        let path = dir.join(&name);
-        write_atomic(&path, &bytes)?;
-        written.push(path);
-    }
-    Ok(written)
+    let files = design_files(design, outputs)?;
+    folder::write_set(dir, &files, &crate::outputs::ALL_OUTPUTS)
 }

@@ -89,7 +89,7 @@ pub fn solid(part: &Part) -> Result<Solid, StepError> {
 }
 
 /// The STEP text of the part.
-pub fn step_text(part: &Part, design_name: &str) -> Result<String, StepError> {
+pub fn step_text(part: &Part, design_name: &str, run_id: &str) -> Result<String, StepError> {
     let solid = solid(part)?;
     let compressed = solid.compress();
     let body = CompleteStepDisplay::new(
@@ -104,7 +104,7 @@ pub fn step_text(part: &Part, design_name: &str) -> Result<String, StepError> {
         .ok_or_else(|| StepError::Modeling("no DATA section".into()))?;
     let name = design_name.replace('\'', "");
     Ok(format!(
-        "ISO-10303-21;\nHEADER;\nFILE_DESCRIPTION(('camspring cam part {name}'), '2;1');\n\
+        "ISO-10303-21;\nHEADER;\nFILE_DESCRIPTION(('camspring cam part {name}', 'camspring run {run_id}'), '2;1');\n\
          FILE_NAME('cam.step', '{STEP_TIME_STAMP}', ('camspring'), ('camspring'), \
          'camspring {} with truck-stepio 0.3', 'camspring', '');\n\
          FILE_SCHEMA(('ISO-10303-042'));\nENDSEC;\n{}",

@@ -321,6 +321,23 @@ impl Spec {
         }
     }
 
+    /// The run's identity: the first 16 hex digits of the SHA-256 of the camspring version and
+    /// the spec as understood. Every output of a run carries it (design.json, and the header of
+    /// every format that has one), so a file from another run is detectable.
+    pub fn run_id(&self) -> String {
+        use sha2::{Digest, Sha256};
+        let mut h = Sha256::new();
+        h.update(env!("CARGO_PKG_VERSION").as_bytes());
+        h.update(b"\n");
+        // Serialising plain numbers, strings and enums cannot fail; an empty text would
+        // still give an identity of the version alone.
+        h.update(serde_json::to_vec(self).unwrap_or_default());
+        h.finalize()[..8]
+            .iter()
+            .map(|b| format!("{b:02x}"))
+            .collect()
+    }
+
     /// Checks every range rule and every rule between keys, section by section, and returns
     /// the first broken one, naming its key. A spec from TOML, from the builder or changed by
     /// a sweep all pass through here.

@@ -158,14 +158,16 @@ pub fn report_html(
 ) -> String {
     let mut h = String::with_capacity(256 * 1024);
     let name = escape(&summary.name);
+    let run = escape(&summary.run_id);
     let status = summary.status.as_str();
     let _ = write!(
         h,
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\
          <meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\
+         <meta name=\"camspring-run\" content=\"{run}\">\
          <title>camspring report: {name}</title><style>{STYLE}</style></head><body>\n\
          <h1>Exponential cam spring '{name}' {}</h1>\n\
-         <p>camspring {} design report. Every number carries its unit; the same data is in \
+         <p>camspring {} design report (run {run}). Every number carries its unit; the same data is in \
          <a href=\"design.json\">design.json</a>.</p>\n\
          <nav><a href=\"#law\">Law</a><a href=\"#curves\">Force</a><a href=\"#profile\">Cam</a>\
          <a href=\"#stroke\">Pressure angle and stress</a><a href=\"#checks\">Checks</a>\

@@ -176,6 +176,7 @@ pub fn write(design: &Design, passes: &[Pass], summary: &ToolpathSummary) -> (St
         env!("CARGO_PKG_VERSION"),
         spec.name
     ));
+    w.comment(&format!("camspring run {}", spec.run_id()));
     w.comment(&format!(
         "law F = {:.6} N exp({:.6}/mm x) + {:.6} N",
         law.mu_n, law.k2_per_mm, law.f0_n
