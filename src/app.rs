@@ -22,6 +22,60 @@ pub const EXIT_BAD_INPUT: u8 = 2;
 /// Exit code: the machine failed us (an output could not be written).
 pub const EXIT_IO: u8 = 3;
 
+/// The largest spec file read (a spec is a few kilobytes).
+pub const MAX_SPEC_BYTES: u64 = 1 << 20;
+
+/// The largest calibration log read: a day at 1 kHz is about 3 GB of CSV.
+pub const MAX_LOG_BYTES: u64 = 16 << 30;
+
+/// Reads at most `limit` bytes of `path` as text; a larger input (a huge file, or an endless
+/// device like /dev/zero) is refused before it is read whole.
+fn read_limited(path: &Path, limit: u64, what: &str) -> Result<String> {
+    use std::io::Read;
+    let read_err = |source| Error::Read {
+        path: path.to_path_buf(),
+        source,
+    };
+    let file = std::fs::File::open(path).map_err(read_err)?;
+    let mut bytes = Vec::new();
+    file.take(limit + 1)
+        .read_to_end(&mut bytes)
+        .map_err(read_err)?;
+    if bytes.len() as u64 > limit {
+        return Err(Error::Argument(format!(
+            "{}: larger than {} KiB; expected a {what}",
+            path.display(),
+            limit >> 10
+        )));
+    }
+    String::from_utf8(bytes).map_err(|e| {
+        Error::Argument(format!(
+            "{}: not UTF-8 text (byte {}); expected a {what}",
+            path.display(),
+            e.utf8_error().valid_up_to()
+        ))
+    })
+}
+
+/// A reader that fails once it has given `left` bytes.
+struct Limited<R> {
+    inner: R,
+    left: u64,
+}
+
+impl<R: std::io::Read> std::io::Read for Limited<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        self.left = self.left.checked_sub(n as u64).ok_or_else(|| {
+            std::io::Error::other(format!(
+                "the input is larger than {} GiB",
+                MAX_LOG_BYTES >> 30
+            ))
+        })?;
+        Ok(n)
+    }
+}
+
 /// Reads a spec file, or the built-in default spec when `path` is None.
 pub fn load_spec(path: Option<&Path>) -> Result<Spec> {
     match path {
@@ -30,10 +84,7 @@ pub fn load_spec(path: Option<&Path>) -> Result<Spec> {
             source,
         }),
         Some(p) => {
-            let text = std::fs::read_to_string(p).map_err(|source| Error::Read {
-                path: p.to_path_buf(),
-                source,
-            })?;
+            let text = read_limited(p, MAX_SPEC_BYTES, "TOML spec")?;
             Spec::from_toml(&text).map_err(|source| Error::Spec {
                 path: p.display().to_string(),
                 source,
@@ -167,6 +218,19 @@ pub fn read_log_file(
         source,
     })?;
     let size = file.metadata().map(|m| m.len()).unwrap_or(0);
+    if size > MAX_LOG_BYTES {
+        return Err(Error::Argument(format!(
+            "{}: {} GiB is larger than the {} GiB a log may have",
+            path.display(),
+            size >> 30,
+            MAX_LOG_BYTES >> 30
+        )));
+    }
+    // A device or pipe has no size: stop it at the same limit while reading.
+    let file = Limited {
+        inner: file,
+        left: MAX_LOG_BYTES,
+    };
     let bar = progress
         .then(|| {
             progress_bar(

@@ -64,6 +64,43 @@ pub enum Error {
 }
 
 impl Error {
+    /// What failed, as a word for scripts: spec, design, part, machining, log, simulate,
+    /// identify, estimate, argument, read, write.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Error::Spec { .. } => "spec",
+            Error::Design(crate::design::DesignError::Spec(_)) => "spec",
+            Error::Design(_) => "design",
+            Error::Plan(PlanError::Part(_)) => "part",
+            Error::Plan(PlanError::Toolpath(_)) => "machining",
+            Error::Plan(PlanError::Mesh(_)) | Error::Export(_) => "write",
+            Error::Log { .. } => "log",
+            Error::Simulate(_) => "simulate",
+            Error::Identify(_) => "identify",
+            Error::Estimate(_) => "estimate",
+            Error::Argument(_) => "argument",
+            Error::Read { .. } => "read",
+        }
+    }
+
+    /// The spec key the error names, if any.
+    pub fn key(&self) -> Option<&str> {
+        match self {
+            Error::Spec { source, .. }
+            | Error::Design(crate::design::DesignError::Spec(source)) => source.key(),
+            _ => None,
+        }
+    }
+
+    /// The line of the spec or log the error names, if any.
+    pub fn line(&self) -> Option<u64> {
+        match self {
+            Error::Spec { source, .. } => source.line().map(|l| l as u64),
+            Error::Log { source, .. } => source.line(),
+            _ => None,
+        }
+    }
+
     /// Whether the user's input is at fault (exit code 2) rather than the machine (exit code 3).
     pub fn is_bad_input(&self) -> bool {
         matches!(

@@ -76,21 +76,29 @@ pub enum LawError {
     /// Produced by [`solve`] and [`check_law`] when the law gives no positive force at x = 0.
     #[error(
         "the law gives F(0) = mu + F0 = {f_at_zero:.6} N, but the spring force must be positive \
-         over the whole stroke; raise fmin or lower c0"
+         over the whole stroke; {fix}"
     )]
     NonPositiveStartForce {
         /// mu + F0.
         f_at_zero: f64,
+        /// What to change, in the terms of the spec's form.
+        fix: String,
     },
 }
 
-/// Checks that a law can be realised by a spring over x >= 0.
+/// Checks that a given law can be realised by a spring over x >= 0.
 pub fn check_law(law: &ExpLaw) -> Result<(), LawError> {
     let f_at_zero = law.force_n(0.0);
     if f_at_zero > 0.0 {
         Ok(())
     } else {
-        Err(LawError::NonPositiveStartForce { f_at_zero })
+        Err(LawError::NonPositiveStartForce {
+            f_at_zero,
+            fix: format!(
+                "raise law.f0 above {:.6} N (= -mu) or raise law.mu",
+                -law.mu_n
+            ),
+        })
     }
 }
 
@@ -168,7 +176,12 @@ pub fn solve(t: &LawTargets) -> Result<SolvedLaw, LawError> {
         k2_per_mm: alpha / t.l0_mm,
         f0_n: f0,
     };
-    check_law(&law)?;
+    if law.force_n(0.0) <= 0.0 {
+        return Err(LawError::NonPositiveStartForce {
+            f_at_zero: law.force_n(0.0),
+            fix: "raise law.fmin or lower law.c0".into(),
+        });
+    }
     let c0_achieved = law.stiffness_n_per_mm(t.l0_mm) * t.delta0_mm / law.force_n(t.l0_mm);
     let residuals = Residuals {
         force_at_l0: (law.force_n(t.l0_mm) - t.fmin_n) / t.fmin_n,

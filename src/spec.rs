@@ -17,7 +17,7 @@ use crate::model::{
     LawSpec, LawTargets, MachiningSpec, Material, OutputSpec, PartSpec, Spec, SpecError,
     SpringArrangement, WorkOffset, MATERIALS,
 };
-use crate::units::{parse_quantity, Dimension, UnitError};
+use crate::units::{parse_quantity, quoted, Dimension, UnitError};
 
 /// The commented starter spec that `camspring init` writes (a copy of `specs/starter.toml`).
 pub const STARTER_SPEC_TOML: &str = include_str!("../specs/starter.toml");
@@ -28,11 +28,37 @@ pub const DEFAULT_SPEC_TOML: &str = include_str!("../specs/paper.toml");
 // ---------------------------------------------------------------------------------------------
 // Raw TOML shape
 
-#[derive(Debug, Clone, Deserialize)]
-#[serde(untagged)]
+#[derive(Debug, Clone)]
 enum RawValue {
     Number(f64),
     Text(String),
+}
+
+impl<'de> Deserialize<'de> for RawValue {
+    /// A number, or a string with a unit; anything else is refused saying so (with the key
+    /// and line the TOML reader adds).
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct Visitor;
+        impl serde::de::Visitor<'_> for Visitor {
+            type Value = RawValue;
+            fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str("a number, or a quantity with its unit such as \"20 mm\"")
+            }
+            fn visit_i64<E: serde::de::Error>(self, v: i64) -> Result<RawValue, E> {
+                Ok(RawValue::Number(v as f64))
+            }
+            fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<RawValue, E> {
+                Ok(RawValue::Number(v as f64))
+            }
+            fn visit_f64<E: serde::de::Error>(self, v: f64) -> Result<RawValue, E> {
+                Ok(RawValue::Number(v))
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<RawValue, E> {
+                Ok(RawValue::Text(v.to_string()))
+            }
+        }
+        d.deserialize_any(Visitor)
+    }
 }
 
 type Q = Option<Spanned<RawValue>>;
@@ -199,9 +225,13 @@ impl<'a> Reader<'a> {
         let (value, found) = match raw.get_ref() {
             RawValue::Number(n) => (*n, format!("{n}")),
             RawValue::Text(t) => {
-                let found = format!("\"{t}\"");
+                let found = quoted(t);
                 let parsed = parse_quantity(t, dim).map_err(|e| {
                     let expected = match (&e, dim) {
+                        (UnitError::TooLong, _) => format!(
+                            "a number of at most {} characters",
+                            crate::units::MAX_NUMBER_CHARS
+                        ),
                         (_, Dimension::Dimensionless) => "a plain number".to_string(),
                         (UnitError::NotFinite, _) => format!("a finite value, {}", dim.describe()),
                         _ => format!("{} (units: {})", dim.describe(), dim.unit_list()),
@@ -281,7 +311,7 @@ impl<'a> Reader<'a> {
         let start = raw.span().start;
         match raw.get_ref() {
             toml::Value::String(name) => Material::preset(name)
-                .ok_or_else(|| self.invalid(key, start, format!("\"{name}\""), expected)),
+                .ok_or_else(|| self.invalid(key, start, quoted(name), expected)),
             toml::Value::Table(table) => {
                 if let Some(unknown) = table.keys().find(|k| {
                     !["youngs_modulus", "poisson_ratio", "yield_strength"].contains(&k.as_str())
@@ -348,7 +378,7 @@ impl<'a> Reader<'a> {
                 self.invalid(
                     key,
                     s.span().start,
-                    format!("\"{}\"", s.get_ref()),
+                    quoted(s.get_ref()),
                     format!("one of {}", names.join(", ")),
                 )
             })
@@ -422,8 +452,8 @@ fn read(raw: &RawSpec, r: &mut Reader<'_>) -> Result<Spec, SpecError> {
             r.remember(
                 "name",
                 n.span().start,
-                format!("\"{}\"", n.get_ref()),
-                format!("\"{trimmed}\""),
+                quoted(n.get_ref()),
+                quoted(&trimmed),
             );
             trimmed
         }
@@ -667,7 +697,9 @@ fn read_machining(raw: &RawSpec, r: &mut Reader<'_>) -> Result<MachiningSpec, Sp
     let mut len =
         |key: &str, q: &Q, default: f64| r.or(&format!("machining.{key}"), q, D::Length, default);
     let tool_diameter_mm = len("tool_diameter", &m.tool_diameter, d.tool_diameter_mm)?;
-    let depth_per_pass_mm = len("depth_per_pass", &m.depth_per_pass, d.depth_per_pass_mm)?;
+    // By default a pass is half the cutter deep, at most 1 mm.
+    let depth_default = d.depth_per_pass_mm.min(tool_diameter_mm / 2.0);
+    let depth_per_pass_mm = len("depth_per_pass", &m.depth_per_pass, depth_default)?;
     let stock_allowance_mm = len("stock_allowance", &m.stock_allowance, d.stock_allowance_mm)?;
     let safe_z_mm = len("safe_z", &m.safe_z, d.safe_z_mm)?;
     let stock_top_z_mm = len("stock_top_z", &m.stock_top_z, d.stock_top_z_mm)?;

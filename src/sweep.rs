@@ -14,6 +14,9 @@ use serde::Serialize;
 use crate::cam::checks::Status;
 use crate::model::{FrictionSource, Spec};
 
+/// The most designs one sweep runs.
+pub const MAX_POINTS: usize = 10_000;
+
 /// A follower setting the sweep can vary.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
@@ -115,7 +118,19 @@ pub fn parse_axis(text: &str) -> Result<Axis, String> {
 /// Checks every value of every axis against the spec's own rules ([`Spec::validate`]), so a
 /// sweep refuses exactly what a spec file would, naming the key.
 pub fn check_axes(spec: &Spec, axes: &[Axis]) -> Result<(), String> {
-    for axis in axes {
+    let points: usize = axes.iter().map(|a| a.values.len()).product();
+    if points > MAX_POINTS {
+        return Err(format!(
+            "the axes make {points} designs; expected at most {MAX_POINTS} (fewer values per --vary)"
+        ));
+    }
+    for (i, axis) in axes.iter().enumerate() {
+        if axes[..i].iter().any(|a| a.key == axis.key) {
+            return Err(format!(
+                "--vary {} is given twice; expected each key once (up to 3 different keys)",
+                axis.key.column()
+            ));
+        }
         for &v in &axis.values {
             let mut s = spec.clone();
             axis.key.apply(&mut s, v);

@@ -174,7 +174,12 @@ pub enum UnitError {
         /// What was expected, e.g. "a length such as \"20 mm\"".
         dimension: &'static str,
     },
-    /// Produced by [`parse_quantity`] and [`check_finite`] for NaN or infinity.
+    /// Produced by [`parse_quantity`] for a number of more than [`MAX_NUMBER_CHARS`]
+    /// characters.
+    #[error("a number of more than {MAX_NUMBER_CHARS} characters")]
+    TooLong,
+    /// Produced by [`parse_quantity`] and [`check_finite`] for NaN or infinity, also when
+    /// the conversion to the default unit overflows.
     #[error("the value is not a finite number")]
     NotFinite,
 }
@@ -199,6 +204,9 @@ pub fn check_finite(value: f64) -> Result<f64, UnitError> {
 pub fn parse_quantity(text: &str, dimension: Dimension) -> Result<f64, UnitError> {
     let text = text.trim();
     let split = number_prefix_len(text);
+    if split > MAX_NUMBER_CHARS {
+        return Err(UnitError::TooLong);
+    }
     if split == 0 {
         return Err(UnitError::NoNumber);
     }
@@ -218,21 +226,48 @@ pub fn parse_quantity(text: &str, dimension: Dimension) -> Result<f64, UnitError
             unit: unit.to_string(),
             dimension: dimension.describe(),
         })
+        .and_then(check_finite)
 }
 
-/// Length of the longest prefix of `text` that parses as a float.
+/// The longest number a quantity may spell (longer ones are refused without parsing).
+pub const MAX_NUMBER_CHARS: usize = 100;
+
+/// Length of the longest prefix of `text` that parses as a float, looking at no more than
+/// [`MAX_NUMBER_CHARS`] + 1 characters (so the work is bounded whatever the input).
 fn number_prefix_len(text: &str) -> usize {
-    let mut best = 0;
-    for (i, c) in text.char_indices() {
-        if !(c.is_ascii_digit() || matches!(c, '.' | '+' | '-' | 'e' | 'E')) {
+    let run = text
+        .bytes()
+        .take(MAX_NUMBER_CHARS + 1)
+        .take_while(|c| c.is_ascii_digit() || matches!(c, b'.' | b'+' | b'-' | b'e' | b'E'))
+        .count();
+    (1..=run)
+        .rev()
+        .find(|&end| text[..end].parse::<f64>().is_ok())
+        .unwrap_or(0)
+}
+
+/// How a value read from a file is quoted in a message: in double quotes, cut to 60
+/// characters, with control characters (terminal escapes, newlines) written as escapes so a
+/// message can never drive the terminal.
+pub fn quoted(text: &str) -> String {
+    format!("\"{}\"", printable(text, 60))
+}
+
+/// `text` cut to `max` characters (marked with "..."), control characters escaped.
+pub fn printable(text: &str, max: usize) -> String {
+    let mut out = String::new();
+    for (i, c) in text.chars().enumerate() {
+        if i == max {
+            out.push_str("...");
             break;
         }
-        let end = i + c.len_utf8();
-        if text[..end].parse::<f64>().is_ok() {
-            best = end;
+        if c.is_control() {
+            out.extend(c.escape_default());
+        } else {
+            out.push(c);
         }
     }
-    best
+    out
 }
 
 /// Parses a positive quantity of `dimension`, such as a duration or a rate; the message says
@@ -280,6 +315,34 @@ pub fn parse_fraction(text: &str) -> Result<f64, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn long_numbers_are_refused_in_linear_time_and_overflow_is_caught() {
+        let long = "1".repeat(200_000) + " mm";
+        assert_eq!(
+            parse_quantity(&long, Dimension::Length),
+            Err(UnitError::TooLong)
+        );
+        let ok = "1".repeat(MAX_NUMBER_CHARS) + " mm";
+        assert!(parse_quantity(&ok, Dimension::Length).is_ok());
+        assert_eq!(
+            parse_quantity("1e308 kN", Dimension::Force),
+            Err(UnitError::NotFinite)
+        );
+        assert_eq!(parse_quantity("-2.5e1mm", Dimension::Length), Ok(-25.0));
+    }
+
+    #[test]
+    fn quoted_values_cannot_drive_the_terminal() {
+        assert_eq!(
+            quoted("a\u{1b}]0;pwned\u{7}b"),
+            "\"a\\u{1b}]0;pwned\\u{7}b\""
+        );
+        assert_eq!(
+            quoted(&"x".repeat(100)),
+            format!("\"{}...\"", "x".repeat(60))
+        );
+    }
 
     #[test]
     fn parses_durations_rates_and_fractions() {

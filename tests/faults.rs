@@ -313,3 +313,291 @@ fn concurrent_runs_on_one_folder_never_mix() {
     }
     eprintln!("{refused} of 60 runs found the folder busy");
 }
+
+/// Writes `text` as `name` in `dir` and returns the name.
+fn file(dir: &Path, name: &str, text: &str) -> String {
+    std::fs::write(dir.join(name), text).unwrap();
+    name.to_string()
+}
+
+fn stderr(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+fn paper_with(replace: &str, by: &str) -> String {
+    let text = std::fs::read_to_string(spec("paper.toml")).unwrap();
+    assert!(text.contains(replace), "{replace}");
+    text.replace(replace, by)
+}
+
+const GIVEN: &str = "[law]\nmu = 1\nk2 = 0.2\nf0 = 1\nxmax = \"20 mm\"\n[follower]\ncount = 2\nspring_rate = 5\nroller_radius = 3\npreload = 1.5\n";
+
+#[test]
+fn former_panics_are_clear_errors_or_designs() {
+    let d = tempfile::tempdir().unwrap();
+    // A small cutter with no depth_per_pass: half the cutter per pass, a program.
+    let small = file(
+        d.path(),
+        "small.toml",
+        &paper_with("tool_diameter = \"6 mm\"", "tool_diameter = \"0.5 mm\""),
+    );
+    let out = camspring(d.path(), &["design", &small, "-o", "s"]);
+    assert_eq!(out.status.code(), Some(0));
+    assert!(std::fs::read_to_string(d.path().join("s/cam.ngc"))
+        .unwrap()
+        .contains("0.25"));
+    let out = camspring(
+        d.path(),
+        &["sweep", &small, "--vary", "preload=1..2:2", "-o", "w"],
+    );
+    assert_eq!(out.status.code(), Some(0));
+    // A stroke of 2e-8 mm.
+    let tiny = file(d.path(), "tiny.toml", &GIVEN.replace("20 mm", "2e-8 mm"));
+    let out = camspring(d.path(), &["design", &tiny]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(stderr(&out).contains("law.xmax") && stderr(&out).contains("line 5"));
+    // A force spike of 1e160 N in a log.
+    camspring(
+        d.path(),
+        &["simulate", "--duration", "120s", "-o", "calib.csv"],
+    );
+    let log = std::fs::read_to_string(d.path().join("calib.csv")).unwrap();
+    let mut lines: Vec<String> = log.lines().map(str::to_string).collect();
+    let mut cells: Vec<String> = lines[5000].split(',').map(str::to_string).collect();
+    cells[1] = "1e160".into();
+    lines[5000] = cells.join(",");
+    file(d.path(), "spike.csv", &(lines.join("\n") + "\n"));
+    for cmd in ["identify", "estimate"] {
+        let out = camspring(d.path(), &[cmd, "spike.csv"]);
+        assert_eq!(out.status.code(), Some(2), "{cmd}");
+        assert!(stderr(&out).contains("line 5001"), "{cmd}");
+    }
+    let out = camspring(d.path(), &["validate", &spec("paper.toml"), "spike.csv"]);
+    assert_eq!(out.status.code(), Some(2));
+}
+
+#[test]
+fn the_library_identifies_a_spiked_log_without_panicking() {
+    use camspring::estimate::sim::{simulate, SimSettings};
+    let law = camspring::ExpLaw {
+        mu_n: 1.0115357,
+        k2_per_mm: 0.2640383,
+        f0_n: 1.2126706,
+    };
+    let settings = SimSettings {
+        duration_s: 120.0,
+        ..SimSettings::default()
+    };
+    let (mut log, _) = simulate(&law, 20.0, 200.0, &settings).unwrap();
+    for k in [10, 5000, 11_990] {
+        let mut spiked = log.clone();
+        spiked.force_n[k] = 1e160;
+        // An error or a result, never a panic.
+        let _ = camspring::identify(&spiked, &camspring::SensorNoise::default());
+    }
+    log.force_n[100] = f64::INFINITY;
+    let _ = camspring::identify(&log, &camspring::SensorNoise::default());
+}
+
+#[test]
+fn values_that_drive_work_are_bounded() {
+    let d = tempfile::tempdir().unwrap();
+    for (text, key) in [
+        (
+            paper_with("thickness = \"10 mm\"", "thickness = \"1e6 mm\""),
+            "part.thickness",
+        ),
+        (
+            paper_with(
+                "tool_diameter = \"6 mm\"",
+                "tool_diameter = \"6 mm\"\ndepth_per_pass = \"1e-6 mm\"",
+            ),
+            "machining.depth_per_pass",
+        ),
+        (GIVEN.replace("k2 = 0.2", "k2 = 50"), "law.k2"),
+        (
+            paper_with("fmax = \"200 N\"", "fmax = \"1e300 N\""),
+            "law.fmax",
+        ),
+    ] {
+        let spec = file(d.path(), "bounded.toml", &text);
+        let out = camspring(d.path(), &["design", &spec]);
+        assert_eq!(out.status.code(), Some(2), "{key}");
+        assert!(stderr(&out).contains(key), "{key}: {}", stderr(&out));
+    }
+    // A tiny k2 finishes (it used to loop in the plot's grid).
+    let spec = file(
+        d.path(),
+        "k2.toml",
+        &GIVEN.replace("k2 = 0.2", "k2 = \"1e-20 /mm\""),
+    );
+    assert_eq!(
+        camspring(d.path(), &["design", &spec, "-o", "k"])
+            .status
+            .code(),
+        Some(0)
+    );
+    // Endless or huge inputs are refused before they are read whole.
+    let out = camspring(d.path(), &["design", "/dev/zero"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(stderr(&out).contains("larger than"));
+    let out = camspring(
+        d.path(),
+        &["simulate", "--rate", "166666Hz", "--duration", "300s"],
+    );
+    assert_eq!(out.status.code(), Some(2));
+    assert!(stderr(&out).contains("--rate"));
+    let out = camspring(
+        d.path(),
+        &[
+            "sweep",
+            "--vary",
+            "preload=0..1:200",
+            "--vary",
+            "spring_rate=1..9:200",
+        ],
+    );
+    assert_eq!(out.status.code(), Some(2));
+    assert!(stderr(&out).contains("at most"));
+}
+
+#[cfg(target_os = "linux")]
+#[test]
+fn a_full_stdout_is_exit_code_3_for_calibration_commands_too() {
+    let d = tempfile::tempdir().unwrap();
+    camspring(
+        d.path(),
+        &["simulate", "--duration", "60s", "-o", "calib.csv"],
+    );
+    let full = std::fs::OpenOptions::new()
+        .write(true)
+        .open("/dev/full")
+        .unwrap();
+    let status = bin()
+        .args(["identify", "calib.csv", "--json"])
+        .current_dir(d.path())
+        .stdout(full)
+        .stderr(Stdio::null())
+        .status()
+        .unwrap();
+    assert_eq!(status.code(), Some(3));
+}
+
+#[test]
+fn messages_name_the_key_and_never_echo_control_characters() {
+    let d = tempfile::tempdir().unwrap();
+    let cases: Vec<(String, &str)> = vec![
+        // A terminal title escape in a value.
+        (
+            paper_with("name = \"paper\"", "name = \"a\\u001b]0;pwned\\u0007b\""),
+            "name",
+        ),
+        (
+            paper_with(
+                "fmax = \"200 N\"",
+                &format!("fmax = \"{} N\"", "9".repeat(200_000)),
+            ),
+            "at most 100 characters",
+        ),
+        (
+            paper_with("fmax = \"200 N\"", "fmax = \"1e308 kN\""),
+            "finite",
+        ),
+        (
+            paper_with("fmax = \"200 N\"", "fmax = true"),
+            "a quantity with its unit",
+        ),
+        (GIVEN.replace("f0 = 1", "f0 = -2"), "law.f0"),
+        (
+            paper_with(
+                "name = \"paper\"",
+                &format!("name = \"{}\"", "a".repeat(300)),
+            ),
+            "1 to 100",
+        ),
+    ];
+    for (text, needle) in cases {
+        let spec = file(d.path(), "m.toml", &text);
+        let out = camspring(d.path(), &["design", &spec]);
+        assert_eq!(out.status.code(), Some(2), "{needle}");
+        let e = stderr(&out);
+        assert!(e.contains(needle), "{needle}: {e}");
+        assert!(
+            !e.contains('\u{1b}') && !e.contains('\u{7}'),
+            "raw control character: {e:?}"
+        );
+        assert!(
+            e.len() < 2000,
+            "the message echoes too much: {} bytes",
+            e.len()
+        );
+    }
+    // Negative numbers after flags reach the simulator, which names the flag.
+    let out = camspring(d.path(), &["simulate", "--m", "-1", "--duration", "20s"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(stderr(&out).contains("--m -1"));
+    // A window too short is blamed on --window, not on the log.
+    camspring(
+        d.path(),
+        &["simulate", "--duration", "60s", "-o", "calib.csv"],
+    );
+    let out = camspring(d.path(), &["identify", "calib.csv", "--window", "1ms"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(stderr(&out).contains("--window"));
+    // A duplicated column, and a value that overflows after conversion, name the line.
+    let log = std::fs::read_to_string(d.path().join("calib.csv")).unwrap();
+    let dup = log.replacen("t_s,force_n,position_mm", "t_s,force_n,force_n", 1);
+    file(d.path(), "dup.csv", &dup);
+    let out = camspring(d.path(), &["identify", "dup.csv", "--position", "force_n"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(stderr(&out).contains("2 columns named \"force_n\""));
+    let mut lines: Vec<&str> = log.lines().collect();
+    lines[7] = "0.06,1e306,5";
+    file(d.path(), "kn.csv", &(lines.join("\n") + "\n"));
+    let out = camspring(d.path(), &["identify", "kn.csv", "--force", "force_n:kN"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(stderr(&out).contains("line 8"), "{}", stderr(&out));
+    // The same sweep axis twice.
+    let out = camspring(
+        d.path(),
+        &["sweep", "--vary", "preload=0..1", "--vary", "preload=2..3"],
+    );
+    assert_eq!(out.status.code(), Some(2));
+    assert!(stderr(&out).contains("twice"));
+}
+
+#[test]
+fn json_errors_are_json_on_stdout() {
+    let d = tempfile::tempdir().unwrap();
+    let spec = file(
+        d.path(),
+        "bad.toml",
+        &GIVEN.replace("spring_rate = 5", "spring_rate = -5"),
+    );
+    let out = camspring(d.path(), &["design", &spec, "--json"]);
+    assert_eq!(out.status.code(), Some(2));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["error"]["kind"], "spec");
+    assert_eq!(v["error"]["key"], "follower.spring_rate");
+    assert_eq!(v["error"]["line"], 8);
+    assert!(v["error"]["message"]
+        .as_str()
+        .unwrap()
+        .contains("spring_rate"));
+    // A log error names its line; a usage error is an argument error.
+    file(
+        d.path(),
+        "short.csv",
+        "t_s,force_n,position_mm\n0,1,2\n0.01,x,2\n",
+    );
+    let out = camspring(d.path(), &["identify", "short.csv", "--json"]);
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(
+        (v["error"]["kind"].as_str(), v["error"]["line"].as_u64()),
+        (Some("log"), Some(3))
+    );
+    let out = camspring(d.path(), &["design", "--nope", "--json"]);
+    assert_eq!(out.status.code(), Some(2));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["error"]["kind"], "argument");
+}

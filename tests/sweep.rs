@@ -46,6 +46,11 @@ fn axis_values_meet_the_spec_rules_naming_the_key() {
         assert!(e.contains(key), "{axis}: {e}");
     }
     assert!(check_axes(&paper, &[parse_axis("friction=0..0.5").unwrap()]).is_ok());
+    let twice = [
+        parse_axis("preload=0..1").unwrap(),
+        parse_axis("preload=2..3").unwrap(),
+    ];
+    assert!(check_axes(&paper, &twice).unwrap_err().contains("twice"));
 }
 
 #[test]

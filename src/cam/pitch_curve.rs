@@ -97,7 +97,11 @@ pub enum CamError {
         advice: String,
     },
     /// Produced by [`synthesize`] when the integrator fails or the curve would need too many samples.
-    #[error("pitch curve integration failed near x = {x_mm:.4} mm: {message}")]
+    #[error(
+        "the pitch curve cannot be followed near x = {x_mm:.4} mm ({message}); the law changes \
+         too fast for these followers there: lower law.k2 (or the stroke law.xmax), or raise \
+         follower.spring_rate or follower.preload"
+    )]
     Integration {
         /// Where.
         x_mm: f64,
@@ -309,7 +313,7 @@ fn advance(
     solver.set_output(OutputType::Sparse);
     solver.integrate().map_err(|e| CamError::Integration {
         x_mm: state[0],
-        message: e.to_string(),
+        message: format!("the integrator reports: {e}"),
     })?;
     let end = *solver
         .y_out()

@@ -247,9 +247,28 @@ pub enum IdentifyError {
         /// The velocity band (mm/s).
         band_mm_s: f64,
     },
+    /// Produced by [`identify_with_window`] for a window too short for the smoothing filter.
+    #[error(
+        "--window {window_s} s is {samples:.1} samples at this log's {rate_hz} Hz; the \
+         Savitzky-Golay filter needs at least {min} samples, so give --window {min_s} s or more \
+         (or leave it out for the default)"
+    )]
+    WindowTooShort {
+        /// The window asked.
+        window_s: f64,
+        /// In samples.
+        samples: f64,
+        /// The log's rate.
+        rate_hz: f64,
+        /// Fewest samples.
+        min: usize,
+        /// Shortest window for this log (s).
+        min_s: f64,
+    },
     /// Produced by [`identify`] when the log is shorter than the filter window.
     #[error(
-        "the log has {found} samples; the {window}-sample filter window needs at least {needed}"
+        "the log has {found} samples; the {window}-sample filter window (--window) needs at \
+         least {needed}: record a longer run or give a shorter --window"
     )]
     TooShort {
         /// Samples.
@@ -467,6 +486,19 @@ fn scaling(jtj: &M7, active: &Active) -> (Vec<usize>, Vec<f64>) {
 }
 
 /// The normal matrix over the active set, scaled to unit diagonal.
+/// The eigen-decomposition of a symmetric matrix, or None for an empty one or one with a
+/// non-finite entry (nalgebra panics on the first and may not converge on the second).
+fn eigen(m: DMatrix<f64>) -> Option<SymmetricEigen<f64, nalgebra::Dyn>> {
+    (m.nrows() > 0 && m.iter().all(|v| v.is_finite()))
+        .then(|| SymmetricEigen::new(m))
+        .filter(|e| e.eigenvalues.iter().all(|v| v.is_finite()))
+}
+
+/// The eigenvalues of a symmetric matrix, as [`eigen`].
+fn eigenvalues(m: DMatrix<f64>) -> Option<DVector<f64>> {
+    eigen(m).map(|e| e.eigenvalues)
+}
+
 fn scaled(jtj: &M7, active: &Active) -> DMatrix<f64> {
     let (idx, d) = scaling(jtj, active);
     DMatrix::from_fn(idx.len(), idx.len(), |a, b| {
@@ -505,7 +537,9 @@ fn prune(jtj: &M7, active: &mut Active) -> Vec<String> {
     let mut removed = Vec::new();
     while active.iter().any(|a| *a) {
         let (idx, _) = scaling(jtj, active);
-        let eig = SymmetricEigen::new(scaled(jtj, active));
+        let Some(eig) = eigen(scaled(jtj, active)) else {
+            break;
+        };
         let (imin, lmin) =
             eig.eigenvalues
                 .iter()
@@ -667,10 +701,7 @@ fn sandwich(
     let positive = |c: &M7| {
         let (idx, _) = scaling(c, active);
         let sub = DMatrix::from_fn(idx.len(), idx.len(), |a, b| c[(idx[a], idx[b])]);
-        SymmetricEigen::new(sub)
-            .eigenvalues
-            .iter()
-            .all(|&l| l > 0.0)
+        eigenvalues(sub).is_some_and(|e| e.iter().all(|&l| l > 0.0))
     };
     let cov = hinv * truncated * hinv;
     if positive(&cov) {
@@ -718,6 +749,15 @@ pub fn identify_with_window(
     window_s: Option<f64>,
 ) -> Result<Identification, IdentifyError> {
     let dt = log.dt_s();
+    if let Some(w) = window_s.filter(|w| w / dt < sg::MIN_WINDOW as f64) {
+        return Err(IdentifyError::WindowTooShort {
+            window_s: w,
+            samples: w / dt,
+            rate_hz: 1.0 / dt,
+            min: sg::MIN_WINDOW,
+            min_s: sg::MIN_WINDOW as f64 * dt,
+        });
+    }
     let diff = match window_s {
         Some(w) => Differentiator::new(((w / dt).round().clamp(0.0, 1e6) as usize) | 1),
         None => Differentiator::for_rate(1.0 / dt),
@@ -852,7 +892,11 @@ pub fn identify_with_window(
     let dof = (m - active.iter().filter(|a| **a).count()) as f64;
     let (cov, covariance_method) = sandwich(&p, &rows, &active, &weights, diff.window())
         .ok_or_else(|| IdentifyError::NoConvergence("singular covariance".into()))?;
-    let eig = SymmetricEigen::new(scaled(&jtj, &active)).eigenvalues;
+    let eig = eigenvalues(scaled(&jtj, &active)).ok_or_else(|| {
+        IdentifyError::NoConvergence(
+            "no parameter is left that this log determines (a normal matrix that is empty or not finite)".into(),
+        )
+    })?;
     let condition_number = eig.max() / eig.min().max(1e-300);
     let rms = ((0..m)
         .map(|i| (rows.f[i] - model(&p, &rows, i).0).powi(2))

@@ -11,7 +11,7 @@ use std::io::Read;
 
 use serde::Serialize;
 
-use crate::units::{parse_quantity, Dimension};
+use crate::units::{parse_quantity, quoted, Dimension};
 
 /// A column name with the factor to the default unit.
 #[derive(Debug, Clone, PartialEq)]
@@ -106,7 +106,11 @@ pub enum LogError {
         header: String,
     },
     /// Produced by [`read_log`] for a value that is not a finite number.
-    #[error("line {line}: column \"{column}\" = \"{found}\": expected a finite number")]
+    #[error(
+        "line {line}: column {} = {}: expected a finite number",
+        quoted(column),
+        quoted(found)
+    )]
     BadNumber {
         /// 1-based line.
         line: u64,
@@ -114,6 +118,41 @@ pub enum LogError {
         column: String,
         /// The text found.
         found: String,
+    },
+    /// Produced by [`read_log`] for a value that leaves the physical range after conversion to
+    /// N or mm (or overflows).
+    #[error(
+        "line {line}: column {} = {} is {value:e} {unit} after conversion: \
+         expected a magnitude below {limit:e} {unit} (a sensor fault or a wrong unit?)",
+        quoted(column),
+        quoted(found)
+    )]
+    OutOfRange {
+        /// 1-based line.
+        line: u64,
+        /// Column name.
+        column: String,
+        /// The text found.
+        found: String,
+        /// The value in default units.
+        value: f64,
+        /// N or mm.
+        unit: &'static str,
+        /// The largest magnitude accepted.
+        limit: f64,
+    },
+    /// Produced by [`read_log`] when the header names a mapped column more than once.
+    #[error(
+        "line 1: the header has {count} columns named \"{name}\" (the {what} column); \
+         expected exactly one, so that the column read is not a guess"
+    )]
+    DuplicateColumn {
+        /// Column name.
+        name: String,
+        /// time, force or position.
+        what: &'static str,
+        /// How many.
+        count: usize,
     },
     /// Produced by [`read_log`] for a row with too few fields.
     #[error("line {line}: {found} fields, expected {expected} as in the header")]
@@ -163,6 +202,25 @@ pub enum LogError {
     Option(String),
 }
 
+impl LogError {
+    /// The 1-based line of the log the error is about, when it names one.
+    pub fn line(&self) -> Option<u64> {
+        match self {
+            LogError::BadNumber { line, .. }
+            | LogError::ShortRow { line, .. }
+            | LogError::TimeNotIncreasing { line, .. }
+            | LogError::Irregular { line, .. }
+            | LogError::OutOfRange { line, .. } => Some(*line),
+            LogError::DuplicateColumn { .. } | LogError::MissingColumn { .. } => Some(1),
+            _ => None,
+        }
+    }
+}
+
+/// The largest force (N) or position (mm) magnitude a log may hold: far beyond any load cell
+/// or encoder, so a larger value is a fault, not a measurement.
+pub const MAX_MAGNITUDE: f64 = 1e9;
+
 /// An evenly sampled calibration log in s, N and mm.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct CalibrationLog {
@@ -206,6 +264,14 @@ pub fn read_log<R: Read>(
         .map_err(|e| LogError::Io(format!("line 1: {e}")))?
         .clone();
     let find = |c: &Column, what: &'static str| {
+        let count = header.iter().filter(|h| h.trim() == c.name).count();
+        if count > 1 {
+            return Err(LogError::DuplicateColumn {
+                name: c.name.clone(),
+                what,
+                count,
+            });
+        }
         header
             .iter()
             .position(|h| h.trim() == c.name)
@@ -259,6 +325,18 @@ pub fn read_log<R: Read>(
                     found: text.to_string(),
                 })?;
             v[k] = x * factors[k];
+            // Time may be a clock (epoch seconds); force and position have physical bounds.
+            let limit = if k == 0 { f64::MAX } else { MAX_MAGNITUDE };
+            if !v[k].is_finite() || v[k].abs() >= limit {
+                return Err(LogError::OutOfRange {
+                    line,
+                    column: names[k].clone(),
+                    found: text.to_string(),
+                    value: v[k],
+                    unit: ["s", "N", "mm"][k],
+                    limit,
+                });
+            }
         }
         if let Some(&prev) = log.t_s.last() {
             let dt = v[0] - prev;

@@ -31,8 +31,11 @@ pub const ORDER_DERIVATIVES: usize = 5;
 /// An odd window length of about [`WINDOW_SECONDS`] at `rate_hz`, at least 9 samples.
 pub fn window_for_rate(rate_hz: f64) -> usize {
     let n = (WINDOW_SECONDS * rate_hz).round().clamp(0.0, 1e6) as usize;
-    (n | 1).max(9)
+    (n | 1).max(MIN_WINDOW)
 }
+
+/// The shortest window (samples) the cubic kernels with their odd and even offsets take.
+pub const MIN_WINDOW: usize = 9;
 
 /// Weights (per sample, unit spacing) of the `deriv`-th derivative at offset 0 of a polynomial
 /// of `order` fitted by least squares to the samples at `offsets`; zero elsewhere in a window
@@ -79,7 +82,7 @@ pub struct Differentiator {
 impl Differentiator {
     /// The differentiator over `window` samples (odd, at least 9) with cubic polynomials.
     pub fn new(window: usize) -> Differentiator {
-        let half = (window.max(9)) / 2;
+        let half = (window.max(MIN_WINDOW)) / 2;
         let h = half as i64;
         let all: Vec<i64> = (-h..=h).collect();
         let odd: Vec<i64> = all.iter().copied().filter(|o| o % 2 != 0).collect();

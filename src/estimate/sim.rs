@@ -164,6 +164,9 @@ pub enum SimError {
     Settings(String),
 }
 
+/// The most samples one simulated run may have (duration times rate).
+pub const MAX_SAMPLES: f64 = 2e7;
+
 /// Duration of one move of the steps profile: a few filter windows, so that the smoothing
 /// differentiator follows it.
 pub const STEP_RAMP_S: f64 = 1.2;
@@ -206,13 +209,38 @@ pub fn simulate(
     if !(s.rate_hz > 0.0
         && s.duration_s > 0.0
         && s.duration_s * s.rate_hz >= 16.0
-        && s.duration_s * s.rate_hz <= 5e8)
+        && s.duration_s * s.rate_hz <= MAX_SAMPLES)
     {
         return Err(SimError::Settings(format!(
-            "duration {} s at {} Hz gives {} samples; expected 16 to 5e8",
+            "--duration {} s at --rate {} Hz gives {:.0} samples; expected 16 to {MAX_SAMPLES:.0} \
+             (a log and its truth take about 100 bytes per sample in memory)",
             s.duration_s,
             s.rate_hz,
             s.duration_s * s.rate_hz
+        )));
+    }
+    let d = &s.dynamics;
+    for (value, flag, what) in [
+        (d.m_n_s2_per_mm, "--m", "an inertia"),
+        (d.d0_n, "--d0", "a Coulomb friction"),
+        (d.d1_n_s_per_mm, "--d1", "a linear damping"),
+        (s.noise.force_variance_n2, "--force-variance", "a variance"),
+        (
+            s.noise.position_variance_mm2,
+            "--position-variance",
+            "a variance",
+        ),
+    ] {
+        if !(value.is_finite() && value >= 0.0) {
+            return Err(SimError::Settings(format!(
+                "{flag} {value}: expected {what} of 0 or more"
+            )));
+        }
+    }
+    if !d.d2_n_s3_per_mm3.is_finite() {
+        return Err(SimError::Settings(format!(
+            "--d2 {}: expected a finite cubic damping",
+            d.d2_n_s3_per_mm3
         )));
     }
     let n = (s.duration_s * s.rate_hz).round() as usize;

@@ -42,6 +42,35 @@ pub const HERTZ_YIELD_FACTOR: f64 = 1.67;
 /// The most holding tabs a program may leave on the outline.
 pub const MAX_TABS: usize = 16;
 
+/// Limits that keep every accepted spec within bounded work and physical sense (docs/SPEC.md
+/// lists them). A value beyond them is refused naming its key.
+pub mod limits {
+    /// Shortest stroke (mm): below it the part is a speck and its B-spline degenerates.
+    pub const MIN_STROKE_MM: f64 = 0.01;
+    /// Longest stroke (mm).
+    pub const MAX_STROKE_MM: f64 = 10_000.0;
+    /// Largest force anywhere in the law (N).
+    pub const MAX_FORCE_N: f64 = 1e8;
+    /// Largest exponent k2 * Xmax of the law (e^200 is far beyond any spring).
+    pub const MAX_EXPONENT: f64 = 200.0;
+    /// Largest spring rate (N/mm).
+    pub const MAX_SPRING_RATE_N_PER_MM: f64 = 1e7;
+    /// Largest length of the part or follower: preload, roller, plate, web, lead-in (mm).
+    pub const MAX_LENGTH_MM: f64 = 10_000.0;
+    /// Thickest plate (mm).
+    pub const MAX_THICKNESS_MM: f64 = 1_000.0;
+    /// Most mounting holes.
+    pub const MAX_HOLES: usize = 100;
+    /// Largest cutter (mm).
+    pub const MAX_TOOL_DIAMETER_MM: f64 = 100.0;
+    /// Most depth levels a program may cut (thickness plus breakthrough over depth per pass).
+    pub const MAX_DEPTH_LEVELS: f64 = 500.0;
+    /// Longest design name (it names a folder).
+    pub const MAX_NAME_CHARS: usize = 100;
+}
+
+use limits::*;
+
 /// Why a spec was refused. Every variant names the key it is about.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SpecError {
@@ -77,6 +106,18 @@ fn line_prefix(line: Option<usize>) -> String {
 }
 
 impl SpecError {
+    /// The 1-based line of the spec the error is about, when known.
+    pub fn line(&self) -> Option<usize> {
+        match self {
+            SpecError::Invalid { line, .. } => *line,
+            SpecError::Syntax(message) => message
+                .strip_prefix("TOML parse error at line ")
+                .and_then(|r| r.split(',').next())
+                .and_then(|n| n.trim().parse().ok()),
+            SpecError::Missing { .. } => None,
+        }
+    }
+
     /// The key the error is about, if it names one.
     pub fn key(&self) -> Option<&str> {
         match self {
@@ -298,6 +339,7 @@ fn check(key: &str, value: f64, range: Range, unit: &str) -> Result<(), SpecErro
 /// with '.'.
 pub fn is_valid_name(name: &str) -> bool {
     !name.is_empty()
+        && name.chars().count() <= MAX_NAME_CHARS
         && name
             .chars()
             .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
@@ -345,9 +387,8 @@ impl Spec {
         if !is_valid_name(&self.name) {
             return Err(invalid(
                 "name",
-                format!("\"{}\"", self.name),
-                "a non-empty name of letters, digits, '-', '_' or '.' (it names the output folder)"
-                    .into(),
+                crate::units::quoted(&self.name),
+                format!("a name of 1 to {MAX_NAME_CHARS} letters, digits, '-', '_' or '.', not starting with '.' (it names the output folder)"),
             ));
         }
         validate_law(&self.law)?;
@@ -359,12 +400,17 @@ impl Spec {
     }
 }
 
+fn stroke() -> Range {
+    Range::Closed(MIN_STROKE_MM, MAX_STROKE_MM)
+}
+
 fn validate_law(law: &LawSpec) -> Result<(), SpecError> {
     match law {
         LawSpec::Targets(t) => {
-            check("law.fmax", t.fmax_n, Range::Positive, "N")?;
-            check("law.fmin", t.fmin_n, Range::Positive, "N")?;
-            check("law.xmax", t.xmax_mm, Range::Positive, "mm")?;
+            let force = Range::Open(0.0, MAX_FORCE_N);
+            check("law.fmax", t.fmax_n, force, "N")?;
+            check("law.fmin", t.fmin_n, force, "N")?;
+            check("law.xmax", t.xmax_mm, stroke(), "mm")?;
             check("law.l0", t.l0_mm, Range::Positive, "mm")?;
             check("law.c0", t.c0, Range::Positive, "")?;
             check("law.delta0", t.delta0_mm, Range::Positive, "mm")?;
@@ -385,10 +431,31 @@ fn validate_law(law: &LawSpec) -> Result<(), SpecError> {
             Ok(())
         }
         LawSpec::Given { law, xmax_mm } => {
-            check("law.xmax", *xmax_mm, Range::Positive, "mm")?;
-            check("law.mu", law.mu_n, Range::Positive, "N")?;
-            check("law.k2", law.k2_per_mm, Range::Positive, "1/mm")?;
-            check("law.f0", law.f0_n, Range::Any, "N")
+            check("law.xmax", *xmax_mm, stroke(), "mm")?;
+            check("law.mu", law.mu_n, Range::Open(0.0, MAX_FORCE_N), "N")?;
+            check(
+                "law.k2",
+                law.k2_per_mm,
+                Range::Open(0.0, MAX_EXPONENT / xmax_mm),
+                "1/mm",
+            )?;
+            check(
+                "law.f0",
+                law.f0_n,
+                Range::Open(-MAX_FORCE_N, MAX_FORCE_N),
+                "N",
+            )?;
+            let fmax = law.force_n(*xmax_mm);
+            if !fmax.is_finite() || fmax.abs() >= MAX_FORCE_N {
+                return Err(invalid(
+                    "law.mu",
+                    found_value(law.mu_n, "N"),
+                    format!(
+                        "a law whose force at law.xmax stays below {MAX_FORCE_N:e} N (it reaches {fmax:e} N)"
+                    ),
+                ));
+            }
+            Ok(())
         }
     }
 }
@@ -411,16 +478,12 @@ fn validate_follower(f: &Follower) -> Result<(), SpecError> {
     check(
         "follower.spring_rate",
         f.spring_rate_n_per_mm,
-        Range::Positive,
+        Range::Open(0.0, MAX_SPRING_RATE_N_PER_MM),
         "N/mm",
     )?;
-    check("follower.preload", f.preload_mm, Range::NonNegative, "mm")?;
-    check(
-        "follower.roller_radius",
-        f.roller_radius_mm,
-        Range::NonNegative,
-        "mm",
-    )?;
+    let length = Range::Closed(0.0, MAX_LENGTH_MM);
+    check("follower.preload", f.preload_mm, length, "mm")?;
+    check("follower.roller_radius", f.roller_radius_mm, length, "mm")?;
     let friction_range = Range::HalfOpen(0.0, MAX_FRICTION);
     match f.friction {
         FrictionSource::Coefficient { coefficient } => {
@@ -493,16 +556,25 @@ fn validate_part(p: &PartSpec) -> Result<(), SpecError> {
     )?;
     validate_material("part.cam_material", &p.cam_material)?;
     validate_material("part.roller_material", &p.roller_material)?;
-    check("part.lead_in", p.lead_in_mm, Range::NonNegative, "mm")?;
-    check("part.run_out", p.run_out_mm, Range::NonNegative, "mm")?;
-    check("part.web", p.web_mm, Range::Positive, "mm")?;
+    let length = Range::Closed(0.0, MAX_LENGTH_MM);
+    check("part.lead_in", p.lead_in_mm, length, "mm")?;
+    check("part.run_out", p.run_out_mm, length, "mm")?;
+    check("part.web", p.web_mm, Range::Open(0.0, MAX_LENGTH_MM), "mm")?;
+    if p.holes.len() > MAX_HOLES {
+        return Err(invalid(
+            "part.holes",
+            format!("{} holes", p.holes.len()),
+            format!("at most {MAX_HOLES} holes"),
+        ));
+    }
+    let place = Range::Closed(-MAX_LENGTH_MM, MAX_LENGTH_MM);
     for (i, h) in p.holes.iter().enumerate() {
-        check(&format!("part.holes[{i}].x"), h.x_mm, Range::Any, "mm")?;
-        check(&format!("part.holes[{i}].y"), h.y_mm, Range::Any, "mm")?;
+        check(&format!("part.holes[{i}].x"), h.x_mm, place, "mm")?;
+        check(&format!("part.holes[{i}].y"), h.y_mm, place, "mm")?;
         check(
             &format!("part.holes[{i}].diameter"),
             h.diameter_mm,
-            Range::Positive,
+            Range::Open(0.0, MAX_LENGTH_MM),
             "mm",
         )?;
     }
@@ -513,7 +585,7 @@ fn validate_machining(m: &MachiningSpec, part: &PartSpec) -> Result<(), SpecErro
     check(
         "machining.tool_diameter",
         m.tool_diameter_mm,
-        Range::Positive,
+        Range::Closed(0.01, MAX_TOOL_DIAMETER_MM),
         "mm",
     )?;
     check(
@@ -551,14 +623,16 @@ fn validate_machining(m: &MachiningSpec, part: &PartSpec) -> Result<(), SpecErro
             ),
         ));
     }
+    let length = Range::Closed(0.0, MAX_LENGTH_MM);
+    let height = Range::Closed(-MAX_LENGTH_MM, MAX_LENGTH_MM);
     check(
         "machining.stock_allowance",
         m.stock_allowance_mm,
-        Range::NonNegative,
+        length,
         "mm",
     )?;
-    check("machining.safe_z", m.safe_z_mm, Range::Any, "mm")?;
-    check("machining.stock_top_z", m.stock_top_z_mm, Range::Any, "mm")?;
+    check("machining.safe_z", m.safe_z_mm, height, "mm")?;
+    check("machining.stock_top_z", m.stock_top_z_mm, height, "mm")?;
     if m.safe_z_mm <= m.stock_top_z_mm {
         return Err(invalid(
             "machining.safe_z",
@@ -572,9 +646,21 @@ fn validate_machining(m: &MachiningSpec, part: &PartSpec) -> Result<(), SpecErro
     check(
         "machining.breakthrough",
         m.breakthrough_mm,
-        Range::NonNegative,
+        Range::Closed(0.0, MAX_THICKNESS_MM),
         "mm",
     )?;
+    let levels = ((part.thickness_mm + m.breakthrough_mm) / m.depth_per_pass_mm).ceil();
+    if levels > MAX_DEPTH_LEVELS {
+        return Err(invalid(
+            "machining.depth_per_pass",
+            found_value(m.depth_per_pass_mm, "mm"),
+            format!(
+                "at least {:.4} mm: part.thickness + machining.breakthrough = {} mm would take {levels} depth levels (at most {MAX_DEPTH_LEVELS})",
+                (part.thickness_mm + m.breakthrough_mm) / MAX_DEPTH_LEVELS,
+                part.thickness_mm + m.breakthrough_mm
+            ),
+        ));
+    }
     check(
         "machining.tolerance",
         m.tolerance_mm,
@@ -584,7 +670,7 @@ fn validate_machining(m: &MachiningSpec, part: &PartSpec) -> Result<(), SpecErro
     check(
         "machining.lead_in_radius",
         m.lead_in_radius_mm,
-        Range::Positive,
+        Range::Open(0.0, MAX_LENGTH_MM),
         "mm",
     )?;
     if m.tabs > MAX_TABS {

@@ -147,8 +147,7 @@ pub fn render_panel(panel: &Panel, x0: f64, y0: f64, w: f64, h: f64) -> Group {
             .set("fill", "white")
             .set("stroke", "#444"),
     );
-    let mut t = (xmin / xs).ceil() * xs;
-    while t <= xmax + 1e-9 * xs {
+    for t in ticks(xmin, xmax, xs) {
         g = g
             .add(
                 Line::new()
@@ -164,10 +163,8 @@ pub fn render_panel(panel: &Panel, x0: f64, y0: f64, w: f64, h: f64) -> Group {
                     .set("y", y0 + top + ph + 16.0)
                     .set("text-anchor", "middle"),
             );
-        t += xs;
     }
-    let mut t = (ymin / ys).ceil() * ys;
-    while t <= ymax + 1e-9 * ys {
+    for t in ticks(ymin, ymax, ys) {
         g = g
             .add(
                 Line::new()
@@ -183,7 +180,6 @@ pub fn render_panel(panel: &Panel, x0: f64, y0: f64, w: f64, h: f64) -> Group {
                     .set("y", py(t) + 4.0)
                     .set("text-anchor", "end"),
             );
-        t += ys;
     }
     g = g
         .add(
@@ -298,6 +294,21 @@ pub fn document(panels: &[Panel], w: f64, h: f64) -> Document {
         doc = doc.add(render_panel(p, w * i as f64, 0.0, w, h));
     }
     doc
+}
+
+/// The most grid lines an axis gets.
+const MAX_TICKS: f64 = 100.0;
+
+/// Grid positions: the multiples of `step` from `min` to `max`, computed from their index so
+/// that a step tiny against the values cannot stall, and at most [`MAX_TICKS`] of them (none
+/// for a degenerate axis).
+fn ticks(min: f64, max: f64, step: f64) -> Vec<f64> {
+    let (first, last) = ((min / step).ceil(), (max / step + 1e-9).floor());
+    if !(first.is_finite() && last.is_finite() && step > 0.0) || last - first > MAX_TICKS {
+        return Vec::new();
+    }
+    let n = (last - first).max(-1.0) as i64;
+    (0..=n).map(|i| (first + i as f64) * step).collect()
 }
 
 #[cfg(test)]

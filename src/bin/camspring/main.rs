@@ -11,6 +11,7 @@ use std::path::Path;
 use std::process::ExitCode;
 
 use clap::{CommandFactory, Parser};
+
 use serde_json::json;
 
 use camspring::app::{
@@ -69,13 +70,25 @@ fn emit(result: Result<Report, Error>, json: bool) -> ExitCode {
     let report = match result {
         Ok(r) => r,
         Err(e) => {
-            // Every message already carries its cause (key, line, OS error).
-            eprintln!("error: {e}");
-            return ExitCode::from(if e.is_bad_input() {
+            let code = if e.is_bad_input() {
                 EXIT_BAD_INPUT
             } else {
                 EXIT_IO
-            });
+            };
+            // Every message already carries its cause (key, line, OS error).
+            let message = sanitize(&e.to_string());
+            eprintln!("error: {message}");
+            if json {
+                let mut error = json!({ "kind": e.kind(), "message": message });
+                if let Some(key) = e.key() {
+                    error["key"] = json!(key);
+                }
+                if let Some(line) = e.line() {
+                    error["line"] = json!(line);
+                }
+                return print_json_error(error, code);
+            }
+            return ExitCode::from(code);
         }
     };
     let text = if json {
@@ -94,6 +107,56 @@ fn emit(result: Result<Report, Error>, json: bool) -> ExitCode {
             ExitCode::from(EXIT_IO)
         }
     }
+}
+
+/// A message with its control characters (other than line breaks) escaped, so that nothing
+/// echoed from a spec, a log or an argument can drive the terminal.
+fn sanitize(message: &str) -> String {
+    message
+        .split('\n')
+        .map(|l| camspring::units::printable(l, usize::MAX))
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// `{"error": {...}}` on stdout, for `--json`; the exit code stays the error's.
+fn print_json_error(error: serde_json::Value, code: u8) -> ExitCode {
+    let text = serde_json::to_string_pretty(&json!({ "error": error })).unwrap_or_default();
+    match writeln!(std::io::stdout().lock(), "{text}") {
+        Ok(()) => ExitCode::from(code),
+        Err(_) => ExitCode::from(EXIT_IO),
+    }
+}
+
+/// Parses the arguments; a usage error is printed like every other error (sanitised, and as
+/// JSON with `--json`) with clap's exit code 2.
+fn parse_args() -> Result<Cli, ExitCode> {
+    Cli::try_parse().map_err(|e| {
+        use clap::error::ErrorKind;
+        if matches!(
+            e.kind(),
+            ErrorKind::DisplayHelp
+                | ErrorKind::DisplayVersion
+                | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+        ) {
+            let _ = e.print();
+            return ExitCode::from(if e.use_stderr() {
+                EXIT_BAD_INPUT
+            } else {
+                EXIT_OK
+            });
+        }
+        let message = sanitize(e.render().to_string().trim_end());
+        eprintln!("{message}");
+        if std::env::args().any(|a| a == "--json") {
+            let text = message.trim_start_matches("error: ").to_string();
+            return print_json_error(
+                json!({ "kind": "argument", "message": text }),
+                EXIT_BAD_INPUT,
+            );
+        }
+        ExitCode::from(EXIT_BAD_INPUT)
+    })
 }
 
 /// Colours the status words PASS, WARN, FAIL and REFUSED, only when stdout is a terminal and
@@ -223,7 +286,10 @@ fn init(path: &Path, force: bool) -> Result<Report, Error> {
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = match parse_args() {
+        Ok(cli) => cli,
+        Err(code) => return code,
+    };
     match cli.command {
         Command::Design { spec, out, json } => emit(
             run_design(spec.as_deref(), out.as_deref()).and_then(|run| {
