@@ -601,3 +601,13 @@ fn json_errors_are_json_on_stdout() {
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["error"]["kind"], "argument");
 }
+
+#[test]
+fn the_current_folder_is_not_replaced() {
+    let d = tempfile::tempdir().unwrap();
+    std::fs::write(d.path().join("keep.txt"), "x").unwrap();
+    let out = camspring(d.path(), &["design", "-o", "."]);
+    assert_eq!(out.status.code(), Some(3));
+    assert!(stderr(&out).contains("current folder"));
+    assert!(d.path().join("keep.txt").exists());
+}

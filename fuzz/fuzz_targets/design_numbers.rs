@@ -58,8 +58,8 @@ tabs = {tabs}
     let Ok(design) = camspring::design::design(&spec) else {
         return;
     };
-    if let Ok(part) = camspring::part::build(&design) {
-        let _ = camspring::export::step::step_text(&part, "fuzz", "0");
-        let _ = camspring::toolpath::passes(&design, &part);
+    // The plan (part, mesh, tool path, G-code) and every file's bytes (STEP included).
+    if let Ok(outputs) = camspring::plan(&design) {
+        let _ = camspring::export::design_files(&design, &outputs);
     }
 });

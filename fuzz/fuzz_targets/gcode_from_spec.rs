@@ -1,4 +1,5 @@
-//! The whole chain from a fuzzed spec to G-code: parse, design, part, toolpath and program.
+//! The whole chain from a fuzzed spec to every output's bytes: parse, design, plan (part,
+//! mesh, toolpath, program) and serialisation.
 //! Any spec the parser accepts must give outputs or an error, never a panic.
 #![no_main]
 use libfuzzer_sys::fuzz_target;
@@ -13,7 +14,8 @@ fuzz_target!(|data: &[u8]| {
     let Ok(design) = camspring::design::design(&spec) else {
         return;
     };
-    if let Ok(part) = camspring::part::build(&design) {
-        let _ = camspring::toolpath::passes(&design, &part);
+    // The plan (part, mesh, tool path, G-code) and every file's bytes, in memory.
+    if let Ok(outputs) = camspring::plan(&design) {
+        let _ = camspring::export::design_files(&design, &outputs);
     }
 });

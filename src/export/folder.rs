@@ -55,6 +55,20 @@ fn resolve(dir: &Path) -> Result<(PathBuf, PathBuf, String), ExportError> {
             path: dir.clone(),
             why: "an output folder needs a name of its own (not `.`, `..` or `/`)".into(),
         })?;
+    // The folder is replaced as a whole: a shell standing in it would be left in a removed folder.
+    if let (Ok(here), Ok(there)) = (
+        std::env::current_dir().and_then(fs::canonicalize),
+        fs::canonicalize(&absolute),
+    ) {
+        if here.starts_with(&there) {
+            return Err(ExportError::NotWritable {
+                path: dir.clone(),
+                why: "it is (or holds) the current folder, and a run replaces its output folder \
+                      as a whole; give a folder of its own, for example -o out/NAME"
+                    .into(),
+            });
+        }
+    }
     let parent = absolute
         .parent()
         .map(Path::to_path_buf)

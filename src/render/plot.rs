@@ -322,4 +322,13 @@ mod tests {
         assert_eq!(nice_step(200.0, 4.0), 50.0);
         assert!((nice_step(0.7, 7.0) - 0.1).abs() < 1e-12);
     }
+
+    #[test]
+    fn ticks_are_bounded_even_when_the_step_is_below_the_values_resolution() {
+        assert_eq!(ticks(0.0, 10.0, 2.0), vec![0.0, 2.0, 4.0, 6.0, 8.0, 10.0]);
+        assert_eq!(ticks(-1.0, 1.0, 1.0), vec![-1.0, 0.0, 1.0]);
+        // 1 + 1e-20 == 1: a step loop would never advance.
+        assert!(ticks(1.0, 1.0 + 1e-12, 1e-20).is_empty());
+        assert!(ticks(0.0, 1.0, f64::NAN).is_empty());
+    }
 }
