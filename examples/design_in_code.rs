@@ -25,10 +25,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // Every rule a TOML spec obeys is checked here too, naming the key.
     let spec = Spec::builder(law, follower).name("from-code").build()?;
     let d = design(&spec)?;
-    println!(
-        "F = {:.4} N * exp({:.5} /mm * x) + {:.4} N",
-        d.law.law.mu_n, d.law.law.k2_per_mm, d.law.law.f0_n
-    );
+    println!("{}", d.law.law.describe());
     println!(
         "lift {:.3} mm, max pressure angle {:.2} deg",
         d.pitch_curve.lift_mm(),

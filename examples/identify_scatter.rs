@@ -14,7 +14,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let seeds: u64 = args.get(1).map_or(Ok(20), |s| s.parse())?;
     let seconds: f64 = args.get(2).map_or(Ok(300.0), |s| s.parse())?;
     let spec = Spec::from_toml(DEFAULT_SPEC_TOML)?;
-    let law = camspring::design::law_of(&spec)?.law;
+    let law = *camspring::design::law_of(&spec)?
+        .exponential()
+        .ok_or("an exponential law")?;
     let xmax = spec.law.xmax_mm();
     println!(
         "{seeds} seeds x {seconds} s at 100 Hz, paper noise (force 0.017 N^2, position 0.01 mm^2)"
@@ -58,7 +60,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 dynamics,
                 noise: Noise::default(),
             };
-            let (log, _) = simulate(&law, xmax, law.force_n(xmax), &settings)?;
+            let (log, _) = simulate(law, xmax, law.force_n(xmax), &settings)?;
             let id = identify(&log, &SensorNoise::default())?;
             for (p, e) in id.parameters.iter() {
                 let k = p.index();

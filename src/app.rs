@@ -9,7 +9,7 @@ use crate::design::{design, law_of};
 use crate::error::{Error, Result};
 use crate::estimate::pipeline::{estimate, EstimateOptions, EstimateRun, StateName};
 use crate::export::{write_atomic, write_design, ExportError};
-use crate::model::{ExpLaw, Spec};
+use crate::model::{ExpLaw, ForceLaw, Spec};
 use crate::outputs::{plan, DesignSummary};
 use crate::spec::DEFAULT_SPEC_TOML;
 
@@ -152,12 +152,25 @@ pub struct SimulateRun {
     /// Samples written.
     pub samples: usize,
     /// The spring law simulated.
-    pub law: ExpLaw,
+    pub law: ForceLaw,
 }
 
-/// The law a spec designs: solved from its targets, or given.
-pub fn designed_law(spec: &Spec) -> Result<ExpLaw> {
+/// The law a spec designs: solved from its targets or conditions, given, or tabulated.
+pub fn designed_law(spec: &Spec) -> Result<ForceLaw> {
     Ok(law_of(spec).map_err(|e| Error::Design(e.into()))?.law)
+}
+
+/// The exponential law a spec designs, for the estimator's affine-stiffness model; a
+/// tabulated law is refused saying why.
+pub fn designed_exponential_law(spec: &Spec, what: &str) -> Result<ExpLaw> {
+    match designed_law(spec)? {
+        ForceLaw::Exponential(l) => Ok(l),
+        ForceLaw::Table(_) => Err(Error::Argument(format!(
+            "{what}: the spec's law is a table; the EKF's model (stiffness affine in force, \
+             sigma = k2 (F - F0)) holds only for an exponential law. Use `identify` or \
+             `validate`, which compare the quasi-static force curve with a table law"
+        ))),
+    }
 }
 
 /// Runs `camspring simulate`: a calibration log of the spec's designed spring with known truth.
@@ -348,7 +361,7 @@ pub fn with_init(mut opts: EstimateOptions, init: &InitSource) -> Result<Estimat
     if let InitSource::Spec(path) = init {
         let spec = load_spec(Some(path))?;
         opts.init = crate::estimate::pipeline::EstimateInit::Law {
-            law: designed_law(&spec)?,
+            law: designed_exponential_law(&spec, "estimate --init")?,
             xmax_mm: spec.law.xmax_mm(),
         };
     }
@@ -423,8 +436,29 @@ pub fn run_estimate(
     Ok((est, out))
 }
 
+/// The verdict of `camspring validate`.
+#[derive(Debug, Clone, serde::Serialize)]
+#[serde(untagged)]
+pub enum Verdict {
+    /// An exponential law, checked through identification and the EKF.
+    Law(crate::verdict::validate::Validation),
+    /// A law of another form, checked through the quasi-static force curve.
+    Curve(crate::verdict::validate::CurveValidation),
+}
+
+impl Verdict {
+    /// Whether every criterion passes.
+    pub fn pass(&self) -> bool {
+        match self {
+            Verdict::Law(v) => v.pass,
+            Verdict::Curve(v) => v.pass,
+        }
+    }
+}
+
 /// Runs `camspring validate`: the log against the spec's designed law; writes
-/// `validation.svg` (default next to the log).
+/// `validation.svg` and `validation.html` (default next to the log). An exponential law is
+/// checked through identification and the EKF, a table through its quasi-static curve.
 pub fn run_validate(
     spec_path: Option<&Path>,
     log_path: &Path,
@@ -433,35 +467,43 @@ pub fn run_validate(
     opts: &EstimateOptions,
     tolerance: f64,
     svg: Option<&Path>,
-) -> Result<(crate::verdict::validate::Validation, PathBuf)> {
-    use crate::render::calibration::validation_svg;
-    use crate::verdict::validate::validate;
+) -> Result<(Verdict, PathBuf)> {
+    use crate::render::calibration::{curve_validation_svg, validation_svg};
+    use crate::verdict::validate::{validate, validate_curve};
     let spec = load_spec(spec_path)?;
     let designed = designed_law(&spec)?;
     let log = read_log_file(log_path, map, sampling_tolerance, true)?;
-    let est = estimate_log(&log, opts, true)?;
-    let id = est
-        .identification
-        .as_ref()
-        .ok_or_else(|| Error::Argument("validate needs the identification init".into()))?;
-    let v = validate(&designed, id, &est.run, &log.position_mm, tolerance);
+    let log_name = log_path
+        .file_name()
+        .map_or(String::new(), |n| n.to_string_lossy().into_owned());
+    let (verdict, svg_text, html) = match &designed {
+        ForceLaw::Exponential(law) => {
+            let est = estimate_log(&log, opts, true)?;
+            let id = est
+                .identification
+                .as_ref()
+                .ok_or_else(|| Error::Argument("validate needs the identification init".into()))?;
+            let v = validate(law, id, &est.run, &log.position_mm, tolerance);
+            let svg_text = validation_svg(&v, &est.run);
+            let html = crate::render::html::validation_html(&v, &svg_text, &log_name);
+            (Verdict::Law(v), svg_text, html)
+        }
+        ForceLaw::Table(_) => {
+            let v = validate_curve(&designed, &log, &opts.noise, tolerance);
+            let svg_text = curve_validation_svg(&v);
+            let html = crate::render::html::curve_validation_html(&v, &svg_text, &log_name);
+            (Verdict::Curve(v), svg_text, html)
+        }
+    };
     let svg_path = svg.map(Path::to_path_buf).unwrap_or_else(|| {
         log_path
             .parent()
             .unwrap_or(Path::new("."))
             .join("validation.svg")
     });
-    let svg_text = validation_svg(&v, &est.run);
-    let html = crate::render::html::validation_html(
-        &v,
-        &svg_text,
-        &log_path
-            .file_name()
-            .map_or(String::new(), |n| n.to_string_lossy().into_owned()),
-    );
     write_atomic(&svg_path, svg_text.as_bytes())?;
     write_atomic(&svg_path.with_file_name("validation.html"), html.as_bytes())?;
-    Ok((v, svg_path))
+    Ok((verdict, svg_path))
 }
 
 /// What `camspring sweep` wrote.

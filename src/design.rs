@@ -8,8 +8,8 @@ use crate::cam::checks::{run_checks, Check, CheckInput, Status};
 use crate::cam::forces::{contact_modulus_mpa, predict, ContactModel, RodForce};
 use crate::cam::pitch_curve::{synthesize, CamError, PitchCurve, SynthesisOptions};
 use crate::cam::surface::{offset, CamSurface};
-use crate::law::{check_law, solve, LawError, SolvedLaw};
-use crate::model::{LawSpec, Spec, SpecError};
+use crate::law::{check_law, solve, solve_conditions, LawError, SolvedLaw};
+use crate::model::{ForceLaw, LawSpec, Spec, SpecError};
 
 /// Number of arc-length steps the stroke is at least divided into (for smooth plots).
 pub const MIN_SAMPLES_PER_STROKE: f64 = 250.0;
@@ -83,12 +83,13 @@ pub fn law_of(spec: &Spec) -> Result<SolvedLaw, LawError> {
         LawSpec::Targets(t) => solve(t),
         LawSpec::Given { law, .. } => {
             check_law(law)?;
-            Ok(SolvedLaw {
-                law: *law,
-                alpha: None,
-                residuals: None,
-            })
+            Ok(SolvedLaw::as_given(ForceLaw::Exponential(*law)))
         }
+        LawSpec::Conditions {
+            conditions,
+            xmax_mm,
+        } => solve_conditions(conditions, *xmax_mm),
+        LawSpec::Table { table, .. } => Ok(SolvedLaw::as_given(ForceLaw::Table(table.clone()))),
     }
 }
 

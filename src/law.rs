@@ -10,7 +10,7 @@
 use roots::{find_root_brent, SimpleConvergency};
 use serde::Serialize;
 
-use crate::model::{ExpLaw, LawTargets};
+use crate::model::{limits::MAX_EXPONENT, Condition, ExpLaw, ForceLaw, LawTargets};
 
 /// Relative residuals of the three design conditions for a solved law.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -37,17 +37,47 @@ impl Residuals {
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct SolvedLaw {
     /// The law.
-    #[serde(flatten)]
-    pub law: ExpLaw,
+    pub law: ForceLaw,
     /// alpha = k2 * L0, when solved from targets.
     pub alpha: Option<f64>,
     /// Residuals of the design conditions, when solved from targets.
     pub residuals: Option<Residuals>,
+    /// Relative residual of each condition, when solved from conditions.
+    pub condition_residuals: Option<Vec<f64>>,
+}
+
+impl SolvedLaw {
+    /// A law used as it is (given or tabulated): no residuals.
+    pub fn as_given(law: ForceLaw) -> SolvedLaw {
+        SolvedLaw {
+            law,
+            alpha: None,
+            residuals: None,
+            condition_residuals: None,
+        }
+    }
+
+    /// The exponential law, when the law is one.
+    pub fn exponential(&self) -> Option<&ExpLaw> {
+        self.law.exponential()
+    }
 }
 
 /// Why a law could not be made.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum LawError {
+    /// Produced by [`solve_conditions`] when no exponential law with k2 > 0 meets the
+    /// conditions.
+    #[error(
+        "no exponential law F = mu exp(k2 x) + F0 with k2 > 0 and a positive force meets the \
+         conditions {conditions}; {hint}"
+    )]
+    NoExponentialLaw {
+        /// The conditions, as written.
+        conditions: String,
+        /// What range would work.
+        hint: String,
+    },
     /// Produced by [`solve`] when eq. (5) has no positive root: the targets describe a
     /// spring whose stiffness falls with force.
     #[error(
@@ -189,15 +219,326 @@ pub fn solve(t: &LawTargets) -> Result<SolvedLaw, LawError> {
         c0: (c0_achieved - t.c0) / t.c0,
     };
     Ok(SolvedLaw {
-        law,
+        law: ForceLaw::Exponential(law),
         alpha: Some(alpha),
         residuals: Some(residuals),
+        condition_residuals: None,
     })
+}
+
+/// The conditions' rows [a_mu, a_f0 | b] of A(k2) [mu, F0] = b at exponent rate `k`, each
+/// scaled to unit size (the scale does not change where the system is consistent).
+fn condition_rows(conditions: &[Condition], k: f64) -> Vec<[f64; 3]> {
+    conditions
+        .iter()
+        .map(|c| {
+            let row = match *c {
+                Condition::Force { at_mm, force_n } => [(k * at_mm).exp(), 1.0, force_n],
+                Condition::Stiffness {
+                    at_mm,
+                    stiffness_n_per_mm,
+                } => [k * (k * at_mm).exp(), 0.0, stiffness_n_per_mm],
+                Condition::StiffnessAtForce {
+                    force_n,
+                    stiffness_n_per_mm,
+                } => [0.0, k, k * force_n - stiffness_n_per_mm],
+            };
+            let scale = row.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+            if scale > 0.0 {
+                row.map(|v| v / scale)
+            } else {
+                row
+            }
+        })
+        .collect()
+}
+
+fn det3(r: &[[f64; 3]]) -> f64 {
+    r[0][0] * (r[1][1] * r[2][2] - r[1][2] * r[2][1])
+        - r[0][1] * (r[1][0] * r[2][2] - r[1][2] * r[2][0])
+        + r[0][2] * (r[1][0] * r[2][1] - r[1][1] * r[2][0])
+}
+
+/// (mu, F0) from the best-conditioned pair of rows at `k`, or None when every pair is singular.
+fn mu_f0(rows: &[[f64; 3]]) -> Option<(f64, f64)> {
+    let mut best: Option<(f64, (f64, f64))> = None;
+    for (i, j) in [(0, 1), (0, 2), (1, 2)] {
+        let (a, b) = (rows[i], rows[j]);
+        let det = a[0] * b[1] - a[1] * b[0];
+        let size = det.abs();
+        if size > 1e-12 && best.is_none_or(|(s, _)| size > s) {
+            let mu = (a[2] * b[1] - a[1] * b[2]) / det;
+            let f0 = (a[0] * b[2] - a[2] * b[0]) / det;
+            best = Some((size, (mu, f0)));
+        }
+    }
+    best.map(|b| b.1)
+}
+
+/// The relative residual of one condition for a law.
+fn condition_residual(law: &ExpLaw, c: &Condition) -> f64 {
+    match *c {
+        Condition::Force { at_mm, force_n } => (law.force_n(at_mm) - force_n) / force_n,
+        Condition::Stiffness {
+            at_mm,
+            stiffness_n_per_mm,
+        } => (law.stiffness_n_per_mm(at_mm) - stiffness_n_per_mm) / stiffness_n_per_mm,
+        Condition::StiffnessAtForce {
+            force_n,
+            stiffness_n_per_mm,
+        } => (law.k2_per_mm * (force_n - law.f0_n) - stiffness_n_per_mm) / stiffness_n_per_mm,
+    }
+}
+
+/// The quantity a condition fixes (a force or a stiffness), for the law.
+fn condition_value(law: &ExpLaw, c: &Condition) -> f64 {
+    match *c {
+        Condition::Force { at_mm, .. } => law.force_n(at_mm),
+        Condition::Stiffness { at_mm, .. } => law.stiffness_n_per_mm(at_mm),
+        Condition::StiffnessAtForce { force_n, .. } => law.k2_per_mm * (force_n - law.f0_n),
+    }
+}
+
+/// Solves three independent conditions (force or stiffness at a deflection, stiffness at a
+/// force) for the exponential law over a stroke of `xmax_mm`.
+///
+/// For a fixed k2 every condition is linear in (mu, F0), so the three are consistent exactly
+/// where the determinant of the augmented 3x3 system vanishes: a bracketed root in k2 (a
+/// log-spaced scan over 0 < k2 * xmax <= 200, then Brent's method). mu and F0 follow from two of
+/// the conditions; all three residuals are reported.
+///
+/// ```
+/// use camspring::law::solve_conditions;
+/// use camspring::model::Condition;
+/// let law = solve_conditions(&[
+///     Condition::Force { at_mm: 0.0, force_n: 40.0 },
+///     Condition::Force { at_mm: 15.0, force_n: 800.0 },
+///     Condition::Stiffness { at_mm: 15.0, stiffness_n_per_mm: 180.0 },
+/// ], 15.0).unwrap();
+/// assert!(law.condition_residuals.unwrap().iter().all(|r| r.abs() < 1e-9));
+/// ```
+pub fn solve_conditions(conditions: &[Condition], xmax_mm: f64) -> Result<SolvedLaw, LawError> {
+    let listed = conditions
+        .iter()
+        .map(|c| c.to_string())
+        .collect::<Vec<_>>()
+        .join(", ");
+    let none = |hint: String| LawError::NoExponentialLaw {
+        conditions: listed.clone(),
+        hint,
+    };
+    if conditions.len() != 3 {
+        return Err(none(format!(
+            "exactly three conditions are needed, {} given",
+            conditions.len()
+        )));
+    }
+    let g = |k: f64| det3(&condition_rows(conditions, k));
+    let (k_lo, k_hi) = (1e-6 / xmax_mm, MAX_EXPONENT / xmax_mm);
+    let steps = 600;
+    let grid: Vec<f64> = (0..=steps)
+        .map(|i| k_lo * (k_hi / k_lo).powf(i as f64 / steps as f64))
+        .collect();
+    // Rows are scaled to unit size, so independent conditions give a determinant of order
+    // one somewhere; one that vanishes everywhere means two conditions fix the same thing.
+    let largest = grid
+        .iter()
+        .map(|&k| g(k).abs())
+        .fold(0.0_f64, |m, v| m.max(v));
+    if largest.is_nan() || largest <= 1e-9 {
+        return Err(none(
+            "the conditions are not independent (two of them fix the same thing); give a force \
+             and a stiffness, or forces at two deflections"
+                .into(),
+        ));
+    }
+    let law_at = |k: f64| {
+        mu_f0(&condition_rows(conditions, k)).map(|(mu, f0)| ExpLaw {
+            mu_n: mu,
+            k2_per_mm: k,
+            f0_n: f0,
+        })
+    };
+    for w in grid.windows(2) {
+        let (ga, gb) = (g(w[0]), g(w[1]));
+        if !(ga.is_finite() && gb.is_finite()) || ga * gb > 0.0 {
+            continue;
+        }
+        let mut conv = SimpleConvergency {
+            eps: 1e-15 * w[1],
+            max_iter: 200,
+        };
+        let Ok(k) = find_root_brent(w[0], w[1], g, &mut conv) else {
+            continue;
+        };
+        let Some(law) = law_at(k) else {
+            continue;
+        };
+        let residuals: Vec<f64> = conditions
+            .iter()
+            .map(|c| condition_residual(&law, c))
+            .collect();
+        if law.mu_n > 0.0 && law.force_n(0.0) > 0.0 && residuals.iter().all(|r| r.abs() < 1e-6) {
+            return Ok(SolvedLaw {
+                law: ForceLaw::Exponential(law),
+                alpha: None,
+                residuals: None,
+                condition_residuals: Some(residuals),
+            });
+        }
+    }
+    // What would work: the third condition's value over the family the first two allow,
+    // from nearly straight (k2 -> 0) to the steepest law accepted.
+    let hint = (0..3)
+        .rev()
+        .find_map(|m| {
+            let others: Vec<Condition> = (0..3).filter(|&i| i != m).map(|i| conditions[i]).collect();
+            let at = |k: f64| {
+                let rows = condition_rows(&others, k);
+                let (a, b) = (rows[0], rows[1]);
+                let det = a[0] * b[1] - a[1] * b[0];
+                (det.abs() > 1e-12).then(|| {
+                    let law = ExpLaw {
+                        mu_n: (a[2] * b[1] - a[1] * b[2]) / det,
+                        k2_per_mm: k,
+                        f0_n: (a[0] * b[2] - a[2] * b[0]) / det,
+                    };
+                    condition_value(&law, &conditions[m])
+                })
+            };
+            let (a, b) = (at(k_lo)?, at(k_hi)?);
+            (a.is_finite() && b.is_finite()).then(|| {
+                let unit = match conditions[m] {
+                    Condition::Force { .. } => "N",
+                    _ => "N/mm",
+                };
+                format!(
+                    "with the other two, condition {} ({}) would need a value between {:.6} {unit} (a straight line) and {:.6e} {unit} (k2 * xmax = {MAX_EXPONENT}): an exponential law stiffens as its force grows",
+                    m + 1,
+                    conditions[m],
+                    a.min(b),
+                    a.max(b)
+                )
+            })
+        })
+        .unwrap_or_else(|| {
+            "the conditions are not independent (two of them fix the same thing); give a force \
+             and a stiffness, or forces at two deflections"
+                .to_string()
+        });
+    Err(none(hint))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn conditions_on_the_papers_design_reproduce_the_paper_form_law() {
+        let t = paper();
+        let exact = solve(&t).unwrap();
+        let e = *exact.exponential().unwrap();
+        // The paper's three conditions restated: F(L0) = Fmin, F(Xmax) = Fmax, and the
+        // stiffness at L0 that gives C0.
+        let s_l0 = t.c0 * t.fmin_n / t.delta0_mm;
+        let c = solve_conditions(
+            &[
+                Condition::Force {
+                    at_mm: t.l0_mm,
+                    force_n: t.fmin_n,
+                },
+                Condition::Force {
+                    at_mm: t.xmax_mm,
+                    force_n: t.fmax_n,
+                },
+                Condition::Stiffness {
+                    at_mm: t.l0_mm,
+                    stiffness_n_per_mm: s_l0,
+                },
+            ],
+            t.xmax_mm,
+        )
+        .unwrap();
+        let l = c.exponential().unwrap();
+        assert!((l.k2_per_mm / e.k2_per_mm - 1.0).abs() < 1e-9);
+        assert!((l.mu_n / e.mu_n - 1.0).abs() < 1e-9);
+        assert!((l.f0_n / e.f0_n - 1.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn the_designers_example_solves_and_softening_conditions_say_what_would_work() {
+        let c = solve_conditions(
+            &[
+                Condition::Force {
+                    at_mm: 0.0,
+                    force_n: 40.0,
+                },
+                Condition::Force {
+                    at_mm: 15.0,
+                    force_n: 800.0,
+                },
+                Condition::StiffnessAtForce {
+                    force_n: 800.0,
+                    stiffness_n_per_mm: 180.0,
+                },
+            ],
+            15.0,
+        )
+        .unwrap();
+        assert!(c
+            .condition_residuals
+            .as_ref()
+            .unwrap()
+            .iter()
+            .all(|r| r.abs() < 1e-9));
+        let l = c.exponential().unwrap();
+        // Independent check: stiffness is affine in force with slope k2.
+        assert!((l.stiffness_n_per_mm(15.0) - 180.0).abs() < 1e-7);
+        assert!((l.force_n(0.0) - 40.0).abs() < 1e-9);
+        // 760 N over 15 mm is a mean slope of 50.67 N/mm: a stiffness of 40 N/mm at the end
+        // would be a softening spring.
+        let e = solve_conditions(
+            &[
+                Condition::Force {
+                    at_mm: 0.0,
+                    force_n: 40.0,
+                },
+                Condition::Force {
+                    at_mm: 15.0,
+                    force_n: 800.0,
+                },
+                Condition::Stiffness {
+                    at_mm: 15.0,
+                    stiffness_n_per_mm: 40.0,
+                },
+            ],
+            15.0,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("40 N/mm at 15 mm") && e.contains("50.66"), "{e}");
+        // Dependent conditions are named as such.
+        let e = solve_conditions(
+            &[
+                Condition::Force {
+                    at_mm: 5.0,
+                    force_n: 40.0,
+                },
+                Condition::Force {
+                    at_mm: 5.0,
+                    force_n: 40.0,
+                },
+                Condition::Force {
+                    at_mm: 15.0,
+                    force_n: 800.0,
+                },
+            ],
+            15.0,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("not independent"), "{e}");
+    }
 
     fn paper() -> LawTargets {
         LawTargets::PAPER_EXAMPLE
@@ -207,9 +548,10 @@ mod tests {
     fn paper_example_matches_the_exact_root_from_physics_md() {
         let s = solve(&paper()).unwrap();
         assert!((s.alpha.unwrap() - 1.320_191_476_0).abs() < 1e-9);
-        assert!((s.law.k2_per_mm - 0.264_038_3).abs() < 1e-7);
-        assert!((s.law.mu_n - 1.011_535_7).abs() < 1e-7);
-        assert!((s.law.f0_n - 1.212_670_6).abs() < 1e-7);
+        let l = s.exponential().unwrap();
+        assert!((l.k2_per_mm - 0.264_038_3).abs() < 1e-7);
+        assert!((l.mu_n - 1.011_535_7).abs() < 1e-7);
+        assert!((l.f0_n - 1.212_670_6).abs() < 1e-7);
         assert!(s.residuals.unwrap().max_abs() < 1e-12);
     }
 
@@ -285,7 +627,7 @@ mod tests {
 
     #[test]
     fn energy_is_the_integral_of_force() {
-        let law = solve(&paper()).unwrap().law;
+        let law = *solve(&paper()).unwrap().exponential().unwrap();
         // Composite Simpson on [0, 20] with 2000 intervals.
         let n = 2000;
         let h = 20.0 / n as f64;

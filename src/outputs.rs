@@ -9,7 +9,7 @@ use stl_io::Triangle;
 use crate::cam::checks::{Check, Status};
 use crate::design::Design;
 use crate::law::Residuals;
-use crate::model::{Dialect, FrictionCorrection, Spec, SpringArrangement};
+use crate::model::{Dialect, ForceLaw, FrictionCorrection, Spec, SpringArrangement};
 use crate::part::mesh::{self, StlError};
 use crate::part::{self, Part, PartError};
 use crate::toolpath::{self, Pass, ToolpathError, ToolpathSummary};
@@ -186,18 +186,27 @@ fn part_summary(spec: &Spec, plan: &PartPlan) -> PartSummary {
 pub struct LawSummary {
     /// alpha = k2 * L0 (null for a given law).
     pub alpha: Option<f64>,
-    /// mu.
-    pub mu_n: f64,
-    /// F0.
-    pub f0_n: f64,
-    /// k2.
-    pub k2_per_mm: f64,
-    /// F(0) = mu + F0.
+    /// mu (null for a table).
+    pub mu_n: Option<f64>,
+    /// F0 (null for a table).
+    pub f0_n: Option<f64>,
+    /// k2 (null for a table).
+    pub k2_per_mm: Option<f64>,
+    /// F(0).
     pub force_at_zero_n: f64,
     /// F(Xmax).
     pub force_at_xmax_n: f64,
-    /// Relative residuals of the design conditions.
+    /// Relative residuals of the paper's design conditions (targets form).
     pub residuals: Option<Residuals>,
+    /// How the spec states the law: `targets`, `given`, `conditions` or `table`.
+    pub form: &'static str,
+    /// Relative residual of each condition (conditions form).
+    pub condition_residuals: Option<Vec<f64>>,
+    /// Table points (table form).
+    pub table_points: Option<usize>,
+    /// Largest relative deviation of the corrected stroke's predicted force (forward model,
+    /// from the cam's geometry) from the table at the table's points (table form).
+    pub table_max_rel_error: Option<f64>,
 }
 
 /// The follower block of `design.json`.
@@ -354,6 +363,39 @@ pub fn corrected_stroke_error(design: &Design) -> Option<f64> {
         .try_fold(0.0_f64, |m, e| e.map(|e| m.max(e)))
 }
 
+/// The largest relative deviation of the corrected stroke's predicted force from a table law
+/// at the table's points within the stroke (forward model at the pitch samples, linearly
+/// between the two samples around each point).
+pub fn table_error(design: &Design) -> Option<f64> {
+    let ForceLaw::Table(t) = &design.law.law else {
+        return None;
+    };
+    let corr = design.spec.follower.friction_correction;
+    let predicted = |f: &crate::cam::forces::RodForce| match corr {
+        FrictionCorrection::Unloading => Some(f.unloading_n),
+        FrictionCorrection::Midline => f.loading_n.map(|l| 0.5 * (l + f.unloading_n)),
+        FrictionCorrection::Loading | FrictionCorrection::None => f.loading_n,
+    };
+    let xmax = design.xmax_mm();
+    t.points()
+        .filter(|&(x, _)| x <= xmax)
+        .map(|(x, force)| {
+            let i = design.forces.partition_point(|f| f.x_mm < x);
+            let (a, b) = (
+                &design.forces[i.saturating_sub(1)],
+                &design.forces[i.min(design.forces.len() - 1)],
+            );
+            let (pa, pb) = (predicted(a)?, predicted(b)?);
+            let w = if b.x_mm > a.x_mm {
+                (x - a.x_mm) / (b.x_mm - a.x_mm)
+            } else {
+                0.0
+            };
+            Some(((pa + w * (pb - pa) - force) / force).abs())
+        })
+        .try_fold(0.0_f64, |m, e| e.map(|e| m.max(e)))
+}
+
 /// Builds the summary of a design.
 pub fn summarize(design: &Design, outputs: &[&str]) -> DesignSummary {
     let spec = &design.spec;
@@ -370,12 +412,19 @@ pub fn summarize(design: &Design, outputs: &[&str]) -> DesignSummary {
         spec: spec.clone(),
         law: LawSummary {
             alpha: design.law.alpha,
-            mu_n: law.mu_n,
-            f0_n: law.f0_n,
-            k2_per_mm: law.k2_per_mm,
+            mu_n: law.exponential().map(|l| l.mu_n),
+            f0_n: law.exponential().map(|l| l.f0_n),
+            k2_per_mm: law.exponential().map(|l| l.k2_per_mm),
             force_at_zero_n: law.force_n(0.0),
             force_at_xmax_n: law.force_n(xmax),
             residuals: design.law.residuals,
+            form: spec.law.form(),
+            condition_residuals: design.law.condition_residuals.clone(),
+            table_points: match law {
+                ForceLaw::Table(t) => Some(t.x_mm.len()),
+                ForceLaw::Exponential(_) => None,
+            },
+            table_max_rel_error: table_error(design),
         },
         follower: FollowerSummary {
             count: f.count,

@@ -29,7 +29,7 @@ fn run(profile: Profile, seconds: f64, seed: u64, d0: f64) -> (CalibrationLog, T
         },
         noise: Noise::default(),
     };
-    simulate(&common::paper_law(), XMAX_MM, FMAX_N, &settings).unwrap()
+    simulate(common::paper_law(), XMAX_MM, FMAX_N, &settings).unwrap()
 }
 
 fn truth_values(law: &ExpLaw, d: &Dynamics) -> [f64; 7] {
@@ -46,7 +46,7 @@ fn truth_values(law: &ExpLaw, d: &Dynamics) -> [f64; 7] {
 
 /// z-scores (estimate - truth) / std of the identified parameters (None: not identifiable).
 fn z_scores(id: &Identification, truth: &Truth) -> [Option<f64>; 7] {
-    let t = truth_values(&truth.law, &truth.dynamics);
+    let t = truth_values(truth.law.exponential().unwrap(), &truth.dynamics);
     let mut z = [None; 7];
     for (p, e) in id.parameters.iter() {
         if let (Some(v), Some(s)) = (e.value, e.std) {
@@ -142,7 +142,7 @@ fn noise_free_logs_give_the_parameters_without_filter_bias() {
         },
     };
     let law = common::paper_law();
-    let (log, truth) = simulate(&law, XMAX_MM, FMAX_N, &settings).unwrap();
+    let (log, truth) = simulate(law, XMAX_MM, FMAX_N, &settings).unwrap();
     let id = identify(
         &log,
         &SensorNoise {
@@ -151,7 +151,7 @@ fn noise_free_logs_give_the_parameters_without_filter_bias() {
         },
     )
     .unwrap();
-    let t = truth_values(&truth.law, &truth.dynamics);
+    let t = truth_values(truth.law.exponential().unwrap(), &truth.dynamics);
     for (p, e) in id.parameters.iter() {
         let (k, name) = (p.index(), p.key());
         let v = e.value.unwrap();
@@ -491,7 +491,7 @@ fn a_longer_window_identifies_a_heavy_spring_on_a_slow_run() {
             },
             noise: Noise::default(),
         };
-        let (log, truth) = simulate(&law, XMAX_MM, FMAX_N, &settings).unwrap();
+        let (log, truth) = simulate(law, XMAX_MM, FMAX_N, &settings).unwrap();
         let id = identify_with_window(&log, &SensorNoise::default(), Some(0.8)).unwrap();
         assert!(id.not_identifiable.is_empty(), "{:?}", id.not_identifiable);
         assert_eq!(id.sg_window, 81);

@@ -28,7 +28,7 @@ fn every_surface_point_touches_its_roller_and_no_other_roller_cuts_in() {
         (follower(2, 5.0, 1.5, 3.0, 0.01, FC::Loading), 3.0),
         (follower(1, 8.0, 3.0, 6.0, 0.05, FC::Midline), 6.0),
     ] {
-        let pitch = synthesize(&law, &f, 20.0, &fine()).unwrap();
+        let pitch = synthesize(law, &f, 20.0, &fine()).unwrap();
         let surface = offset(&pitch, r, 2.0 * tol);
         assert!(surface.is_followable());
         let poly: Vec<(f64, f64)> = pitch.samples.iter().map(|s| (s.x_mm, s.y_mm)).collect();
@@ -62,7 +62,7 @@ fn every_surface_point_touches_its_roller_and_no_other_roller_cuts_in() {
 fn a_roller_larger_than_the_pitch_radius_is_caught_by_both_tests() {
     let law = paper_law();
     let f = follower(2, 5.0, 0.0, 3.0, 0.0, FC::None);
-    let pitch = synthesize(&law, &f, 20.0, &fine()).unwrap();
+    let pitch = synthesize(law, &f, 20.0, &fine()).unwrap();
     let surface = offset(&pitch, 3.0, 2e-4);
     assert!(!surface.folds.is_empty());
     assert!(!surface.interference.is_empty());
@@ -81,7 +81,7 @@ fn a_roller_larger_than_the_pitch_radius_is_caught_by_both_tests() {
 fn concave_radius_is_pitch_radius_plus_roller() {
     let law = paper_law();
     let f = follower(2, 5.0, 1.5, 3.0, 0.0, FC::None);
-    let pitch = synthesize(&law, &f, 20.0, &fine()).unwrap();
+    let pitch = synthesize(law, &f, 20.0, &fine()).unwrap();
     let surface = offset(&pitch, 3.0, 2e-4);
     for (p, s) in surface.points.iter().zip(&pitch.samples) {
         if s.curvature_per_mm > 1e-6 {

@@ -388,7 +388,7 @@ fn the_library_identifies_a_spiked_log_without_panicking() {
         duration_s: 120.0,
         ..SimSettings::default()
     };
-    let (mut log, _) = simulate(&law, 20.0, 200.0, &settings).unwrap();
+    let (mut log, _) = simulate(law, 20.0, 200.0, &settings).unwrap();
     for k in [10, 5000, 11_990] {
         let mut spiked = log.clone();
         spiked.force_n[k] = 1e160;

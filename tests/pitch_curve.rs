@@ -13,10 +13,10 @@ fn frictionless_curve_matches_the_closed_form_everywhere() {
     let law = paper_law();
     for (count, preload) in [(1, 0.0), (2, 0.0), (2, 1.5), (1, 6.0)] {
         let f = follower(count, 5.0, preload, 3.0, 0.0, FC::None);
-        let pitch = synthesize(&law, &f, 20.0, &fine()).unwrap();
+        let pitch = synthesize(law, &f, 20.0, &fine()).unwrap();
         let mut worst = 0.0_f64;
         for s in &pitch.samples {
-            let exact = frictionless_lift_mm(&law, f.k_eff_n_per_mm(), preload, s.x_mm);
+            let exact = frictionless_lift_mm(&law.into(), f.k_eff_n_per_mm(), preload, s.x_mm);
             worst = worst.max((s.y_mm - exact).abs());
         }
         // Well below 0.1 um.
@@ -43,7 +43,7 @@ fn friction_corrected_curves_match_an_independent_rk4() {
         (FC::Midline, 0.1),
     ] {
         let f = follower(2, 5.0, yp, 3.0, mu, corr);
-        let pitch = synthesize(&law, &f, 20.0, &fine()).unwrap();
+        let pitch = synthesize(law, &f, 20.0, &fine()).unwrap();
         // dY/dx written from the force relations of docs/THEORY.md, independently of the crate:
         let slope = |x: f64, y: f64| {
             let force = law.force_n(x);
@@ -83,7 +83,7 @@ fn corrected_stroke_reproduces_the_law_from_geometry() {
         (FC::Midline, 0.15, 0.5),
     ] {
         let f = follower(1, 5.0, preload, 2.0, mu, corr);
-        let pitch = synthesize(&law, &f, 20.0, &fine()).unwrap();
+        let pitch = synthesize(law, &f, 20.0, &fine()).unwrap();
         let phi = f.friction_angle_rad();
         let mut worst = 0.0_f64;
         for s in &pitch.samples {
@@ -116,7 +116,7 @@ fn stored_tangents_agree_with_the_positions() {
         chord_tolerance_mm: 1e-7,
         max_step_mm: 0.01,
     };
-    let pitch = synthesize(&law, &f, 20.0, &dense).unwrap();
+    let pitch = synthesize(law, &f, 20.0, &dense).unwrap();
     let mut worst = 0.0_f64;
     for w in pitch.samples.windows(2) {
         let chord = (w[1].y_mm - w[0].y_mm).atan2(w[1].x_mm - w[0].x_mm);
@@ -140,7 +140,7 @@ fn analytic_curvature_agrees_with_the_change_of_tangent() {
             chord_tolerance_mm: 1e-7,
             max_step_mm: 0.01,
         };
-        let pitch = synthesize(&law, &f, 20.0, &dense).unwrap();
+        let pitch = synthesize(law, &f, 20.0, &dense).unwrap();
         for w in pitch.samples.windows(2) {
             let ds = w[1].s_mm - w[0].s_mm;
             let fd = (w[1].theta_rad - w[0].theta_rad) / ds;
@@ -158,7 +158,7 @@ fn analytic_curvature_agrees_with_the_change_of_tangent() {
 fn arc_length_is_the_polyline_length() {
     let law = paper_law();
     let pitch = synthesize(
-        &law,
+        law,
         &follower(1, 5.0, 0.0, 0.0, 0.0, FC::None),
         20.0,
         &fine(),

@@ -13,9 +13,10 @@ use common::*;
 fn paper_law_exact_root() {
     let s = camspring::law::solve(&paper_targets()).unwrap();
     assert_near(s.alpha.unwrap(), 1.320_191_476_0, 1e-10, "alpha");
-    assert_near(s.law.k2_per_mm, 0.264_038_3, 1e-7, "k2");
-    assert_near(s.law.mu_n, 1.011_535_7, 1e-7, "mu");
-    assert_near(s.law.f0_n, 1.212_670_6, 1e-7, "F0");
+    let l = s.exponential().unwrap();
+    assert_near(l.k2_per_mm, 0.264_038_3, 1e-7, "k2");
+    assert_near(l.mu_n, 1.011_535_7, 1e-7, "mu");
+    assert_near(l.f0_n, 1.212_670_6, 1e-7, "F0");
     let r = s.residuals.unwrap();
     assert!(r.max_abs() < 1e-9, "{r:?}");
 }
@@ -25,7 +26,7 @@ fn lift_and_pressure_angle_at_xmax() {
     let law = paper_law();
     // Single follower, ks = 5 N/mm, no preload: Y(20) = 17.587 mm, pressure angle 66.3 deg.
     let single = synthesize(
-        &law,
+        law,
         &follower(1, 5.0, 0.0, 0.0, 0.0, FC::None),
         20.0,
         &fine(),
@@ -41,7 +42,7 @@ fn lift_and_pressure_angle_at_xmax() {
     );
     // Two opposed followers, one spring each: k_eff = 10 N/mm, Y(20) = 12.436 mm.
     let double = synthesize(
-        &law,
+        law,
         &follower(2, 5.0, 0.0, 0.0, 0.0, FC::None),
         20.0,
         &fine(),
@@ -55,7 +56,7 @@ fn start_curvature_without_preload_is_force_over_rate() {
     // rho(0) = F_S(0)/k_eff = 0.445 mm for a single 5 N/mm follower.
     let law = paper_law();
     let pitch = synthesize(
-        &law,
+        law,
         &follower(1, 5.0, 0.0, 5.0, 0.0, FC::None),
         20.0,
         &fine(),
@@ -73,7 +74,7 @@ fn five_mm_roller_undercuts_near_the_start() {
     // the analytic radius of curvature, computed with SciPy's brentq).
     let law = paper_law();
     let f = follower(1, 5.0, 0.0, 5.0, 0.0, FC::None);
-    let pitch = synthesize(&law, &f, 20.0, &fine()).unwrap();
+    let pitch = synthesize(law, &f, 20.0, &fine()).unwrap();
     let surface = offset(&pitch, 5.0, 2e-4);
     let folds = surface.folds.clone();
     assert_eq!(folds.len(), 1, "{folds:?}");
@@ -99,7 +100,7 @@ fn hysteresis_of_a_loading_corrected_cam() {
     // (A SciPy DOP853 integration of the same ODE gives 121.524 N.)
     let law = paper_law();
     let f = follower(1, 5.0, 0.0, 0.0, 0.1, FC::Loading);
-    let pitch = synthesize(&law, &f, 20.0, &fine()).unwrap();
+    let pitch = synthesize(law, &f, 20.0, &fine()).unwrap();
     let end = pitch.samples.last().unwrap();
     let (loading, unloading) = rod_force(
         f.spring_force_n(end.y_mm),

@@ -12,8 +12,8 @@ use super::forces::RodForce;
 use super::pitch_curve::{synthesize, PitchCurve, SynthesisOptions};
 use super::surface::CamSurface;
 use crate::model::ChecksSpec;
-use crate::model::ExpLaw;
 use crate::model::Follower;
+use crate::model::ForceLaw;
 
 /// Outcome of a check.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize)]
@@ -100,7 +100,7 @@ fn advice_fields(advice: Option<Advice>) -> (Option<String>, Vec<Suggestion>) {
 #[derive(Debug)]
 pub struct CheckInput<'a> {
     /// The law.
-    pub law: &'a ExpLaw,
+    pub law: &'a ForceLaw,
     /// The followers.
     pub follower: &'a Follower,
     /// Stroke.

@@ -12,8 +12,8 @@ use serde::Serialize;
 
 use super::pitch_curve::PitchCurve;
 use super::surface::CamSurface;
-use crate::model::ExpLaw;
 use crate::model::Follower;
+use crate::model::ForceLaw;
 use crate::model::Material;
 
 /// The predicted state of the transmission at one pitch sample.
@@ -72,7 +72,7 @@ pub struct ContactModel {
 
 /// Predicts rod forces and contact stress at every pitch sample.
 pub fn predict(
-    law: &ExpLaw,
+    law: &ForceLaw,
     follower: &Follower,
     pitch: &PitchCurve,
     surface: &CamSurface,

@@ -23,7 +23,7 @@ use ode_solvers::{Dop853, OutputType, System, Vector2};
 use roots::{find_root_brent, SimpleConvergency};
 use serde::Serialize;
 
-use crate::model::ExpLaw;
+use crate::model::ForceLaw;
 use crate::model::{Follower, FrictionCorrection};
 
 /// Tolerance of the pitch-curve integration (relative and absolute, mm).
@@ -168,9 +168,9 @@ fn direction(correction: FrictionCorrection, mu: f64, force: f64, q: f64) -> Dir
 }
 
 /// The mechanics that define the pitch curve: law, followers and friction correction.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct PitchField {
-    law: ExpLaw,
+    law: std::sync::Arc<ForceLaw>,
     k_eff: f64,
     preload: f64,
     mu: f64,
@@ -179,9 +179,9 @@ pub struct PitchField {
 
 impl PitchField {
     /// The field for a law and follower arrangement.
-    pub fn new(law: &ExpLaw, follower: &Follower) -> PitchField {
+    pub fn new(law: &ForceLaw, follower: &Follower) -> PitchField {
         PitchField {
-            law: *law,
+            law: std::sync::Arc::new(law.clone()),
             k_eff: follower.k_eff_n_per_mm(),
             preload: follower.preload_mm,
             mu: follower.friction_coefficient(),
@@ -399,12 +399,12 @@ fn step_for_tolerance(kappa: f64, r: f64, tol: f64, max_step: f64) -> f64 {
 
 /// Makes the pitch curve of `law` for `follower` over 0 <= x <= `xmax_mm`.
 pub fn synthesize(
-    law: &ExpLaw,
+    law: impl Into<ForceLaw>,
     follower: &Follower,
     xmax_mm: f64,
     options: &SynthesisOptions,
 ) -> Result<PitchCurve, CamError> {
-    let field = PitchField::new(law, follower);
+    let field = PitchField::new(&law.into(), follower);
     let r = follower.roller_radius_mm;
     let tol = options.chord_tolerance_mm;
     let min_step = (tol * 1e-3).max(1e-9);
@@ -477,7 +477,7 @@ pub fn synthesize(
 
 /// Closed-form frictionless lift: Y(x) = sqrt(Yp^2 + 2E(x)/k_eff) - Yp (docs/THEORY.md section 2),
 /// written to avoid cancellation for small E.
-pub fn frictionless_lift_mm(law: &ExpLaw, k_eff: f64, preload_mm: f64, x_mm: f64) -> f64 {
+pub fn frictionless_lift_mm(law: &ForceLaw, k_eff: f64, preload_mm: f64, x_mm: f64) -> f64 {
     let e2 = 2.0 * law.energy_nmm(x_mm) / k_eff;
     e2 / ((preload_mm * preload_mm + e2).sqrt() + preload_mm)
 }
@@ -529,11 +529,11 @@ mod tests {
 
     #[test]
     fn unloading_correction_without_preload_is_refused_with_the_needed_preload() {
-        let law = ExpLaw {
+        let law = ForceLaw::Exponential(crate::model::ExpLaw {
             mu_n: 1.0,
             k2_per_mm: 0.26,
             f0_n: 1.2,
-        };
+        });
         let f = Follower {
             count: 1,
             arrangement: SpringArrangement::PerFollower,

@@ -12,7 +12,7 @@ use rand_distr::{Distribution, Normal};
 use serde::Serialize;
 
 use super::log::CalibrationLog;
-use crate::model::ExpLaw;
+use crate::model::ForceLaw;
 
 /// The motion profile.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -122,7 +122,7 @@ impl Default for SimSettings {
 #[derive(Debug, Clone, Serialize)]
 pub struct Truth {
     /// The spring law.
-    pub law: ExpLaw,
+    pub law: ForceLaw,
     /// The other parameters.
     pub dynamics: Dynamics,
     /// Noise injected.
@@ -201,11 +201,12 @@ fn moves(levels: &[f64], ramp: f64, hold: f64, t: f64) -> (f64, f64, f64) {
 
 /// Simulates a calibration run of `law` over the stroke `xmax_mm` (force limit `fmax_n`).
 pub fn simulate(
-    law: &ExpLaw,
+    law: impl Into<ForceLaw>,
     xmax_mm: f64,
     fmax_n: f64,
     s: &SimSettings,
 ) -> Result<(CalibrationLog, Truth), SimError> {
+    let law = &law.into();
     if !(s.rate_hz > 0.0
         && s.duration_s > 0.0
         && s.duration_s * s.rate_hz >= 16.0
@@ -261,7 +262,7 @@ pub fn simulate(
         position_mm: Vec::with_capacity(n),
     };
     let mut truth = Truth {
-        law: *law,
+        law: law.clone(),
         dynamics: d,
         noise: s.noise,
         settings: *s,

@@ -287,14 +287,26 @@ pub fn drawing_svg(design: &Design, part: &Part) -> String {
             t.fmax_n, t.xmax_mm, t.fmin_n, t.l0_mm, t.c0, t.delta0_mm
         ),
         crate::model::LawSpec::Given { .. } => "spec: law given directly (mu, k2, f0)".to_string(),
+        crate::model::LawSpec::Conditions { conditions, .. } => format!(
+            "spec: law from the conditions {}",
+            conditions
+                .iter()
+                .map(|c| c.to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+        crate::model::LawSpec::Table { source, .. } => format!("spec: law tabulated in {source}"),
     };
     let rows = [
         format!("camspring cam part: {}", spec.name),
         targets,
-        format!(
-            "law: F = {:.6} N x exp({:.6} /mm x x) + {:.6} N over x = 0 ... {xmax} mm",
-            law.mu_n, law.k2_per_mm, law.f0_n
-        ),
+        match law.exponential() {
+            Some(l) => format!(
+                "law: F = {:.6} N x exp({:.6} /mm x x) + {:.6} N over x = 0 ... {xmax} mm",
+                l.mu_n, l.k2_per_mm, l.f0_n
+            ),
+            None => format!("law: {} over x = 0 ... {xmax} mm", law.describe()),
+        },
         format!(
             "material {} (E {:.0} MPa); thickness {} mm; roller radius {} mm; {} follower(s)",
             cam.name,

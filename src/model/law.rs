@@ -1,5 +1,7 @@
-//! The force law as data: the exponential law F(x) = mu*exp(k2*x) + F0, the paper's design
-//! targets it is solved from, and how a spec states the law. Solving lives in [`crate::law`].
+//! The force law as data: the exponential law F(x) = mu*exp(k2*x) + F0, a tabulated monotone
+//! law, the forms a spec states a law in (the paper's targets, three conditions, a given law, a
+//! table) and [`ForceLaw`], all the cam synthesis needs: force, stiffness and energy over the
+//! stroke. Solving lives in [`crate::law`].
 
 use serde::Serialize;
 
@@ -73,17 +75,315 @@ impl LawTargets {
     }
 }
 
+/// One condition on an exponential law, in the designer's terms.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Condition {
+    /// The force at a deflection.
+    Force {
+        /// Deflection.
+        at_mm: f64,
+        /// Force there.
+        force_n: f64,
+    },
+    /// The stiffness dF/dx at a deflection.
+    Stiffness {
+        /// Deflection.
+        at_mm: f64,
+        /// Stiffness there.
+        stiffness_n_per_mm: f64,
+    },
+    /// The stiffness where the force has a value (stiffness is affine in force).
+    StiffnessAtForce {
+        /// Force.
+        force_n: f64,
+        /// Stiffness at that force.
+        stiffness_n_per_mm: f64,
+    },
+}
+
+impl std::fmt::Display for Condition {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Condition::Force { at_mm, force_n } => write!(f, "{force_n} N at {at_mm} mm"),
+            Condition::Stiffness {
+                at_mm,
+                stiffness_n_per_mm,
+            } => write!(f, "{stiffness_n_per_mm} N/mm at {at_mm} mm"),
+            Condition::StiffnessAtForce {
+                force_n,
+                stiffness_n_per_mm,
+            } => write!(f, "{stiffness_n_per_mm} N/mm at {force_n} N"),
+        }
+    }
+}
+
+/// A tabulated force law: points (x, F) joined by Steffen's monotone cubic, so the force is
+/// monotone between the points and the stiffness continuous (C1). Beyond the last point the
+/// law continues along its end tangent.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TableLaw {
+    /// Deflections, strictly increasing, the first at 0.
+    pub x_mm: Vec<f64>,
+    /// Forces, positive and non-decreasing.
+    pub force_n: Vec<f64>,
+    /// Slopes dF/dx at the points (Steffen).
+    #[serde(skip)]
+    slopes: Vec<f64>,
+    /// Work from 0 to each point (N mm).
+    #[serde(skip)]
+    energy: Vec<f64>,
+}
+
+impl TableLaw {
+    /// The law through `points` (x mm, F N); the points must already be valid
+    /// ([`crate::model::Spec::validate`] checks them, naming the row).
+    pub fn new(points: &[(f64, f64)]) -> TableLaw {
+        let x: Vec<f64> = points.iter().map(|p| p.0).collect();
+        let y: Vec<f64> = points.iter().map(|p| p.1).collect();
+        let slopes = steffen_slopes(&x, &y);
+        let mut energy = vec![0.0; x.len()];
+        for i in 1..x.len() {
+            let h = x[i] - x[i - 1];
+            energy[i] = energy[i - 1]
+                + h * (y[i - 1] + y[i]) / 2.0
+                + h * h * (slopes[i - 1] - slopes[i]) / 12.0;
+        }
+        TableLaw {
+            x_mm: x,
+            force_n: y,
+            slopes,
+            energy,
+        }
+    }
+
+    /// The points as (x, F).
+    pub fn points(&self) -> impl Iterator<Item = (f64, f64)> + '_ {
+        self.x_mm.iter().copied().zip(self.force_n.iter().copied())
+    }
+
+    /// The segment holding `x` and the local coordinate t in [0, 1] (outside the table: None).
+    fn segment(&self, x: f64) -> Option<(usize, f64, f64)> {
+        let n = self.x_mm.len();
+        if n < 2 || !(x >= self.x_mm[0] && x <= self.x_mm[n - 1]) {
+            return None;
+        }
+        let i = self.x_mm.partition_point(|&xi| xi <= x).clamp(1, n - 1) - 1;
+        let h = self.x_mm[i + 1] - self.x_mm[i];
+        Some((i, h, (x - self.x_mm[i]) / h))
+    }
+
+    /// Force at deflection `x_mm`.
+    pub fn force_n(&self, x_mm: f64) -> f64 {
+        match self.segment(x_mm) {
+            Some((i, h, t)) => {
+                let (y0, y1, m0, m1) = self.ends(i);
+                let (t2, t3) = (t * t, t * t * t);
+                y0 * (2.0 * t3 - 3.0 * t2 + 1.0)
+                    + h * m0 * (t3 - 2.0 * t2 + t)
+                    + y1 * (-2.0 * t3 + 3.0 * t2)
+                    + h * m1 * (t3 - t2)
+            }
+            None => {
+                let k = self.nearest_end(x_mm);
+                self.force_n[k] + self.slopes[k] * (x_mm - self.x_mm[k])
+            }
+        }
+    }
+
+    /// Stiffness dF/dx at `x_mm`.
+    pub fn stiffness_n_per_mm(&self, x_mm: f64) -> f64 {
+        match self.segment(x_mm) {
+            Some((i, h, t)) => {
+                let (y0, y1, m0, m1) = self.ends(i);
+                let t2 = t * t;
+                (y0 * (6.0 * t2 - 6.0 * t) + y1 * (6.0 * t - 6.0 * t2)) / h
+                    + m0 * (3.0 * t2 - 4.0 * t + 1.0)
+                    + m1 * (3.0 * t2 - 2.0 * t)
+            }
+            None => self.slopes[self.nearest_end(x_mm)],
+        }
+    }
+
+    /// Work from 0 to `x_mm` (N mm), integrated exactly over the cubic pieces.
+    pub fn energy_nmm(&self, x_mm: f64) -> f64 {
+        match self.segment(x_mm) {
+            Some((i, h, t)) => {
+                let (y0, y1, m0, m1) = self.ends(i);
+                let (t2, t3, t4) = (t * t, t * t * t, t * t * t * t);
+                self.energy[i]
+                    + h * (y0 * (t4 / 2.0 - t3 + t)
+                        + h * m0 * (t4 / 4.0 - 2.0 * t3 / 3.0 + t2 / 2.0)
+                        + y1 * (-t4 / 2.0 + t3)
+                        + h * m1 * (t4 / 4.0 - t3 / 3.0))
+            }
+            None => {
+                let k = self.nearest_end(x_mm);
+                let d = x_mm - self.x_mm[k];
+                self.energy[k] + self.force_n[k] * d + self.slopes[k] * d * d / 2.0
+            }
+        }
+    }
+
+    fn ends(&self, i: usize) -> (f64, f64, f64, f64) {
+        (
+            self.force_n[i],
+            self.force_n[i + 1],
+            self.slopes[i],
+            self.slopes[i + 1],
+        )
+    }
+
+    fn nearest_end(&self, x: f64) -> usize {
+        if x < self.x_mm[0] {
+            0
+        } else {
+            self.x_mm.len() - 1
+        }
+    }
+}
+
+/// Steffen's slopes (M. Steffen, A&A 239, 1990): monotone between the points, C1, and no
+/// overshoot; one point's slope is zero where the data turn or flatten.
+fn steffen_slopes(x: &[f64], y: &[f64]) -> Vec<f64> {
+    let n = x.len();
+    if n < 2 {
+        return vec![0.0; n];
+    }
+    let h: Vec<f64> = x.windows(2).map(|w| w[1] - w[0]).collect();
+    let d: Vec<f64> = (0..n - 1).map(|i| (y[i + 1] - y[i]) / h[i]).collect();
+    if n == 2 {
+        return vec![d[0]; 2];
+    }
+    let mut m = vec![0.0; n];
+    for i in 1..n - 1 {
+        let p = (d[i - 1] * h[i] + d[i] * h[i - 1]) / (h[i - 1] + h[i]);
+        m[i] =
+            (d[i - 1].signum() + d[i].signum()) * d[i - 1].abs().min(d[i].abs()).min(0.5 * p.abs());
+    }
+    let end = |d0: f64, d1: f64, h0: f64, h1: f64| {
+        let p = d0 * (1.0 + h0 / (h0 + h1)) - d1 * h0 / (h0 + h1);
+        if p * d0 <= 0.0 {
+            0.0
+        } else if p.abs() > 2.0 * d0.abs() {
+            2.0 * d0
+        } else {
+            p
+        }
+    };
+    m[0] = end(d[0], d[1], h[0], h[1]);
+    m[n - 1] = end(d[n - 2], d[n - 3], h[n - 2], h[n - 3]);
+    m
+}
+
+/// A force law over the stroke: what the cam synthesis, the forward model and the plots read.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(tag = "form", rename_all = "snake_case")]
+pub enum ForceLaw {
+    /// F = mu exp(k2 x) + F0 (solved from targets or conditions, or given).
+    Exponential(ExpLaw),
+    /// A tabulated monotone law.
+    Table(TableLaw),
+}
+
+impl ForceLaw {
+    /// Force at deflection `x_mm`.
+    pub fn force_n(&self, x_mm: f64) -> f64 {
+        match self {
+            ForceLaw::Exponential(l) => l.force_n(x_mm),
+            ForceLaw::Table(t) => t.force_n(x_mm),
+        }
+    }
+
+    /// Stiffness dF/dx at `x_mm`.
+    pub fn stiffness_n_per_mm(&self, x_mm: f64) -> f64 {
+        match self {
+            ForceLaw::Exponential(l) => l.stiffness_n_per_mm(x_mm),
+            ForceLaw::Table(t) => t.stiffness_n_per_mm(x_mm),
+        }
+    }
+
+    /// Work from 0 to `x_mm` (N mm).
+    pub fn energy_nmm(&self, x_mm: f64) -> f64 {
+        match self {
+            ForceLaw::Exponential(l) => l.energy_nmm(x_mm),
+            ForceLaw::Table(t) => t.energy_nmm(x_mm),
+        }
+    }
+
+    /// One line for reports and file headers: the formula of an exponential law (6 decimals),
+    /// or the table's size and end forces.
+    pub fn describe(&self) -> String {
+        match self {
+            ForceLaw::Exponential(l) => format!(
+                "F = {:.6} N exp({:.6}/mm x) + {:.6} N",
+                l.mu_n, l.k2_per_mm, l.f0_n
+            ),
+            ForceLaw::Table(t) => {
+                let n = t.x_mm.len();
+                format!(
+                    "F tabulated at {n} points from {} N at {} mm to {} N at {} mm (monotone cubic)",
+                    t.force_n[0], t.x_mm[0], t.force_n[n - 1], t.x_mm[n - 1]
+                )
+            }
+        }
+    }
+
+    /// The exponential law, when this is one (the estimator's affine-stiffness model needs it).
+    pub fn exponential(&self) -> Option<&ExpLaw> {
+        match self {
+            ForceLaw::Exponential(l) => Some(l),
+            ForceLaw::Table(_) => None,
+        }
+    }
+}
+
+impl From<ExpLaw> for ForceLaw {
+    fn from(l: ExpLaw) -> ForceLaw {
+        ForceLaw::Exponential(l)
+    }
+}
+
+impl From<&ExpLaw> for ForceLaw {
+    fn from(l: &ExpLaw) -> ForceLaw {
+        ForceLaw::Exponential(*l)
+    }
+}
+
+impl From<&ForceLaw> for ForceLaw {
+    fn from(l: &ForceLaw) -> ForceLaw {
+        l.clone()
+    }
+}
+
 /// How the force law is given.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum LawSpec {
-    /// Design targets, solved for the law (paper eq. 5).
+    /// The paper's design targets, solved for the law (eq. 5).
     Targets(LawTargets),
-    /// A known law, used as given over the stroke.
+    /// A known exponential law, used as given over the stroke.
     Given {
         /// The law.
         law: ExpLaw,
         /// The stroke (maximum deflection).
+        xmax_mm: f64,
+    },
+    /// Three independent conditions on an exponential law (force or stiffness at a
+    /// deflection, or stiffness at a force), solved for the law.
+    Conditions {
+        /// The conditions.
+        conditions: Vec<Condition>,
+        /// The stroke.
+        xmax_mm: f64,
+    },
+    /// A tabulated force curve.
+    Table {
+        /// The law through the table's points.
+        table: TableLaw,
+        /// Where the table came from (the file named in the spec).
+        source: String,
+        /// The stroke (default: the last row).
         xmax_mm: f64,
     },
 }
@@ -93,7 +393,97 @@ impl LawSpec {
     pub fn xmax_mm(&self) -> f64 {
         match self {
             LawSpec::Targets(t) => t.xmax_mm,
-            LawSpec::Given { xmax_mm, .. } => *xmax_mm,
+            LawSpec::Given { xmax_mm, .. }
+            | LawSpec::Conditions { xmax_mm, .. }
+            | LawSpec::Table { xmax_mm, .. } => *xmax_mm,
         }
+    }
+
+    /// The form's name: `targets`, `given`, `conditions` or `table`.
+    pub fn form(&self) -> &'static str {
+        match self {
+            LawSpec::Targets(_) => "targets",
+            LawSpec::Given { .. } => "given",
+            LawSpec::Conditions { .. } => "conditions",
+            LawSpec::Table { .. } => "table",
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn paper() -> ExpLaw {
+        ExpLaw {
+            mu_n: 1.0115357,
+            k2_per_mm: 0.2640383,
+            f0_n: 1.2126706,
+        }
+    }
+
+    #[test]
+    fn a_dense_table_of_the_exponential_law_reproduces_it() {
+        let law = paper();
+        let points: Vec<(f64, f64)> = (0..=40)
+            .map(|i| {
+                let x = 0.5 * i as f64;
+                (x, law.force_n(x))
+            })
+            .collect();
+        let t = TableLaw::new(&points);
+        for k in 0..=400 {
+            let x = 0.05 * k as f64;
+            let rel = |a: f64, b: f64| ((a - b) / b).abs();
+            assert!(rel(t.force_n(x), law.force_n(x)) < 2e-4, "force at {x}");
+            assert!(rel(t.energy_nmm(x).max(1e-12), law.energy_nmm(x).max(1e-12)) < 2e-4);
+            assert!(
+                rel(t.stiffness_n_per_mm(x), law.stiffness_n_per_mm(x)) < 2e-2,
+                "stiffness at {x}"
+            );
+        }
+        // Exact at the points.
+        for (x, f) in points {
+            assert!((t.force_n(x) - f).abs() < 1e-12 * f);
+        }
+    }
+
+    #[test]
+    fn the_interpolant_is_monotone_and_c1_with_exact_energy() {
+        // A soft-then-stiff curve with a knee and a flat run.
+        let points = [
+            (0.0, 10.0),
+            (2.0, 12.0),
+            (4.0, 12.0),
+            (5.0, 40.0),
+            (8.0, 200.0),
+        ];
+        let t = TableLaw::new(&points);
+        let mut last = t.force_n(0.0);
+        for k in 1..=8000 {
+            let x = k as f64 * 1e-3;
+            let f = t.force_n(x);
+            assert!(f >= last - 1e-12, "not monotone at {x}");
+            assert!(t.stiffness_n_per_mm(x) >= -1e-12);
+            last = f;
+        }
+        for &(x, _) in &points[1..4] {
+            let (a, b) = (
+                t.stiffness_n_per_mm(x - 1e-9),
+                t.stiffness_n_per_mm(x + 1e-9),
+            );
+            assert!(
+                (a - b).abs() < 1e-5 * (1.0 + a.abs()),
+                "stiffness jumps at {x}"
+            );
+        }
+        // Energy against a fine Simpson rule.
+        let n = 8000;
+        let h = 8.0 / n as f64;
+        let mut sum = t.force_n(0.0) + t.force_n(8.0);
+        for i in 1..n {
+            sum += t.force_n(i as f64 * h) * if i % 2 == 1 { 4.0 } else { 2.0 };
+        }
+        assert!((t.energy_nmm(8.0) - sum * h / 3.0).abs() < 1e-9 * t.energy_nmm(8.0));
     }
 }

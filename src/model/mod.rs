@@ -30,7 +30,7 @@ pub mod part;
 use serde::Serialize;
 
 pub use follower::{Follower, FrictionCorrection, FrictionSource, SpringArrangement, MAX_FRICTION};
-pub use law::{ExpLaw, LawSpec, LawTargets};
+pub use law::{Condition, ExpLaw, ForceLaw, LawSpec, LawTargets, TableLaw};
 pub use machining::{Coolant, Dialect, MachiningSpec, WorkOffset};
 pub use part::{Hole, Material, PartSpec, MATERIALS};
 
@@ -429,6 +429,103 @@ fn validate_law(law: &LawSpec) -> Result<(), SpecError> {
                 ));
             }
             Ok(())
+        }
+        LawSpec::Conditions {
+            conditions,
+            xmax_mm,
+        } => {
+            check("law.xmax", *xmax_mm, stroke(), "mm")?;
+            if conditions.len() != 3 {
+                return Err(invalid(
+                    "law.conditions",
+                    format!("{} conditions", conditions.len()),
+                    "exactly three: force or stiffness at a deflection, or stiffness at a force"
+                        .into(),
+                ));
+            }
+            let force = Range::Open(0.0, MAX_FORCE_N);
+            let stiffness = Range::Open(0.0, MAX_SPRING_RATE_N_PER_MM);
+            let at = Range::Closed(0.0, *xmax_mm);
+            for (i, c) in conditions.iter().enumerate() {
+                let key = |k: &str| format!("law.conditions[{i}].{k}");
+                match *c {
+                    Condition::Force { at_mm, force_n } => {
+                        check(&key("at"), at_mm, at, "mm")?;
+                        check(&key("force"), force_n, force, "N")?;
+                    }
+                    Condition::Stiffness {
+                        at_mm,
+                        stiffness_n_per_mm,
+                    } => {
+                        check(&key("at"), at_mm, at, "mm")?;
+                        check(&key("stiffness"), stiffness_n_per_mm, stiffness, "N/mm")?;
+                    }
+                    Condition::StiffnessAtForce {
+                        force_n,
+                        stiffness_n_per_mm,
+                    } => {
+                        check(&key("force"), force_n, force, "N")?;
+                        check(&key("stiffness"), stiffness_n_per_mm, stiffness, "N/mm")?;
+                    }
+                }
+            }
+            Ok(())
+        }
+        LawSpec::Table { table, xmax_mm, .. } => {
+            let n = table.x_mm.len();
+            if n < 2 {
+                return Err(invalid(
+                    "law.table",
+                    format!("{n} row(s)"),
+                    "at least two rows (x, force), the first at x = 0".into(),
+                ));
+            }
+            // Data row k is line k + 1 of the file (after the header).
+            let row = |k: usize| format!("row {} (line {})", k + 1, k + 2);
+            for (k, (x, f)) in table.points().enumerate() {
+                if !(x.is_finite() && f.is_finite()) {
+                    return Err(invalid("law.table", row(k), "finite numbers".into()));
+                }
+                if k == 0 && x != 0.0 {
+                    return Err(invalid(
+                        "law.table",
+                        format!("{}: x = {x} mm", row(k)),
+                        "the first row at x = 0 (the law starts at no deflection)".into(),
+                    ));
+                }
+                if !(f > 0.0 && f < MAX_FORCE_N) {
+                    return Err(invalid(
+                        "law.table",
+                        format!("{}: force {f} N", row(k)),
+                        format!("a positive force below {MAX_FORCE_N:e} N"),
+                    ));
+                }
+                if k > 0 {
+                    let (x0, f0) = (table.x_mm[k - 1], table.force_n[k - 1]);
+                    if x <= x0 {
+                        return Err(invalid(
+                            "law.table",
+                            format!("{}: x = {x} mm after {x0} mm", row(k)),
+                            "deflections strictly increasing".into(),
+                        ));
+                    }
+                    if f < f0 {
+                        return Err(invalid(
+                            "law.table",
+                            format!("{}: force {f} N after {f0} N", row(k)),
+                            "forces that never decrease (a spring's force grows with deflection)"
+                                .into(),
+                        ));
+                    }
+                }
+            }
+            let last = table.x_mm[n - 1];
+            check(
+                "law.xmax",
+                *xmax_mm,
+                Range::Closed(MIN_STROKE_MM, last.min(MAX_STROKE_MM)),
+                "mm",
+            )
         }
         LawSpec::Given { law, xmax_mm } => {
             check("law.xmax", *xmax_mm, stroke(), "mm")?;

@@ -10,7 +10,7 @@ use crate::estimate::ekf::{idx, EkfRun, EkfSettings, STATE_NAMES};
 use crate::estimate::identify::{Identification, Param, SensorNoise};
 use crate::estimate::log::CalibrationLog;
 use crate::estimate::noise::NoiseModel;
-use crate::verdict::validate::{spring_force_n, Validation};
+use crate::verdict::validate::{spring_force_n, CurveValidation, Validation};
 
 /// `camspring noise --json`.
 pub fn noise_json(model: &NoiseModel) -> Value {
@@ -456,4 +456,100 @@ pub fn validation_svg(v: &Validation, run: &EkfRun) -> String {
         ..Default::default()
     };
     plot::document(&[stiffness, convergence], 620.0, 460.0).to_string()
+}
+
+/// The text verdict on a law of any form (the quasi-static curve).
+pub fn format_curve_validation(v: &CurveValidation) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "{}  quasi-static force curve against the designed law over x = {:.3} ... {:.3} mm",
+        if v.pass { "PASS" } else { "FAIL" },
+        v.range_min_mm,
+        v.range_max_mm
+    );
+    for c in &v.criteria {
+        let _ = writeln!(
+            s,
+            "  {}  {:<22} {:>8.3} % (tolerance {:.3} %)  {}",
+            if c.pass { "PASS" } else { "FAIL" },
+            c.name,
+            c.deviation_percent,
+            c.tolerance_percent,
+            c.what
+        );
+    }
+    let _ = writeln!(
+        s,
+        "  taken out of the force: m = {:.4e} N s^2/mm, d0 = {:.4} N, d1 = {:.4} N s/mm, d2 = {:.3e} N s^3/mm^3; {} bins",
+        v.removed_m_n_s2_per_mm,
+        v.removed_d0_n,
+        v.removed_d1_n_s_per_mm,
+        v.removed_d2_n_s3_per_mm3,
+        v.bins.len()
+    );
+    s
+}
+
+/// `validation.svg` for a law of any form: the quasi-static force curve against the design,
+/// and the relative deviation per bin.
+pub fn curve_validation_svg(v: &CurveValidation) -> String {
+    let curve = Panel {
+        title: "Quasi-static force against the design".into(),
+        x_label: "deflection x (mm)".into(),
+        y_label: "force F (N)".into(),
+        series: vec![
+            Series {
+                label: "measured (dynamics removed, binned)".into(),
+                points: v.bins.iter().map(|b| (b.x_mm, b.measured_n)).collect(),
+                color: "#1f77b4",
+                dashed: false,
+                dots: true,
+            },
+            Series {
+                label: "designed law".into(),
+                points: v.bins.iter().map(|b| (b.x_mm, b.designed_n)).collect(),
+                color: "#000",
+                dashed: false,
+                dots: false,
+            },
+        ],
+        ..Default::default()
+    };
+    let tol = v.criteria.first().map_or(0.0, |c| c.tolerance_percent);
+    let (lo, hi) = (v.range_min_mm, v.range_max_mm);
+    let deviation = Panel {
+        title: "Deviation from the design".into(),
+        x_label: "deflection x (mm)".into(),
+        y_label: "deviation (%)".into(),
+        series: vec![
+            Series {
+                label: "measured against designed".into(),
+                points: v
+                    .bins
+                    .iter()
+                    .map(|b| (b.x_mm, 100.0 * (b.measured_n / b.designed_n - 1.0)))
+                    .collect(),
+                color: "#d62728",
+                dashed: false,
+                dots: true,
+            },
+            Series {
+                label: format!("tolerance +-{tol:.2} %"),
+                points: vec![(lo, tol), (hi, tol)],
+                color: "#888",
+                dashed: true,
+                dots: false,
+            },
+            Series {
+                label: String::new(),
+                points: vec![(lo, -tol), (hi, -tol)],
+                color: "#888",
+                dashed: true,
+                dots: false,
+            },
+        ],
+        ..Default::default()
+    };
+    plot::document(&[curve, deviation], 620.0, 460.0).to_string()
 }

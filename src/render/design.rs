@@ -16,21 +16,43 @@ pub fn format_design(s: &DesignSummary, written: &[PathBuf]) -> String {
     let mut o = String::new();
     let _ = writeln!(o, "camspring design '{}'", s.name);
     let l = &s.law;
-    match l.alpha {
-        Some(a) => {
+    match (l.mu_n, l.k2_per_mm, l.f0_n, l.alpha) {
+        (Some(mu), Some(k2), Some(f0), Some(a)) => {
             let _ = writeln!(
                 o,
-                "  law      F = {:.7} N * exp({:.7} /mm * x) + {:.7} N   (alpha = {:.10})",
-                l.mu_n, l.k2_per_mm, l.f0_n, a
+                "  law      F = {mu:.7} N * exp({k2:.7} /mm * x) + {f0:.7} N   (alpha = {a:.10})"
             );
         }
-        None => {
+        (Some(mu), Some(k2), Some(f0), None) => {
             let _ = writeln!(
                 o,
-                "  law      F = {:.7} N * exp({:.7} /mm * x) + {:.7} N   (given)",
-                l.mu_n, l.k2_per_mm, l.f0_n
+                "  law      F = {mu:.7} N * exp({k2:.7} /mm * x) + {f0:.7} N   ({})",
+                l.form
             );
         }
+        _ => {
+            let _ = writeln!(
+                o,
+                "  law      tabulated, {} points: F(0) = {:.4} N, F(Xmax) = {:.4} N (monotone cubic)",
+                l.table_points.unwrap_or(0),
+                l.force_at_zero_n,
+                l.force_at_xmax_n
+            );
+        }
+    }
+    if let Some(r) = &l.condition_residuals {
+        let text: Vec<String> = r.iter().map(|v| format!("{v:.1e}")).collect();
+        let _ = writeln!(
+            o,
+            "           residuals of the conditions: {} (relative)",
+            text.join(", ")
+        );
+    }
+    if let Some(e) = l.table_max_rel_error {
+        let _ = writeln!(
+            o,
+            "           cam force against the table at its points: within {e:.1e} (relative)"
+        );
     }
     if let Some(r) = &l.residuals {
         let _ = writeln!(
@@ -211,10 +233,10 @@ pub fn force_svg(design: &Design) -> String {
         y_label: "stiffness dF/dx (N/mm)".into(),
         series: vec![
             Series {
-                label: format!(
-                    "designed: {:.4}/mm x (F - {:.3} N)",
-                    law.k2_per_mm, law.f0_n
-                ),
+                label: match law.exponential() {
+                    Some(l) => format!("designed: {:.4}/mm x (F - {:.3} N)", l.k2_per_mm, l.f0_n),
+                    None => "designed (table)".into(),
+                },
                 points: pts(&|f| Some((f.design_n, f.stiffness_n_per_mm))),
                 color: "#000",
                 dashed: false,

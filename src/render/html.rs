@@ -178,11 +178,23 @@ pub fn report_html(
 
     // Law.
     let law = &summary.law;
-    let _ = write!(
-        h,
-        "<h2 id=\"law\">Force law</h2>\n<p><b>F(x) = {:.7} N &middot; exp({:.7} /mm &middot; x) + {:.7} N</b>",
-        law.mu_n, law.k2_per_mm, law.f0_n
-    );
+    match (law.mu_n, law.k2_per_mm, law.f0_n) {
+        (Some(mu), Some(k2), Some(f0)) => {
+            let _ = write!(
+                h,
+                "<h2 id=\"law\">Force law</h2>\n<p><b>F(x) = {mu:.7} N &middot; exp({k2:.7} /mm &middot; x) + {f0:.7} N</b> (stated as: {})",
+                law.form
+            );
+        }
+        _ => {
+            let _ = write!(
+                h,
+                "<h2 id=\"law\">Force law</h2>\n<p><b>Tabulated law</b>, {} points joined by a monotone cubic (Steffen); the force plot shows the points. The cam's predicted force meets the table at its points within {:.1e} (relative)",
+                law.table_points.unwrap_or(0),
+                law.table_max_rel_error.unwrap_or(f64::NAN)
+            );
+        }
+    }
     if let Some(alpha) = law.alpha {
         let _ = write!(h, ", alpha = k2 &middot; L0 = {alpha:.10}");
     }
@@ -331,6 +343,56 @@ pub fn validation_html(
         validation_svg,
         "Left: EKF stiffness against spring force over the converged half of the run, with the \
          designed line. Right: k2 against the design and M against its final value over time.",
+    ));
+    h.push_str("</body></html>\n");
+    h
+}
+
+/// `validation.html` for a law of any form: the verdict on the quasi-static force curve.
+pub fn curve_validation_html(
+    v: &crate::verdict::validate::CurveValidation,
+    validation_svg: &str,
+    log_name: &str,
+) -> String {
+    let mut h = String::with_capacity(64 * 1024);
+    let verdict = if v.pass { "PASS" } else { "FAIL" };
+    let _ = write!(
+        h,
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\
+         <title>camspring validation: {log}</title><style>{STYLE}</style></head><body>\n\
+         <h1>Validation of {log} {}</h1>\n\
+         <p>The designed law is not exponential, so the log is judged by its quasi-static \
+         force-deflection curve: inertia (m = {:.4e} N s&sup2;/mm), damping (d1 = {:.4} N s/mm, \
+         d2 = {:.3e} N s&sup3;/mm&sup3;) and Coulomb friction (d0 = {:.4} N) fitted and taken out, \
+         the rest averaged in {} bins over {:.3} to {:.3} mm.</p>\n\
+         <h2>Criteria</h2>\n<table><tr><th>status</th><th>criterion</th><th>deviation</th>\
+         <th>tolerance</th><th>what</th></tr>\n",
+        badge(verdict),
+        v.removed_m_n_s2_per_mm,
+        v.removed_d1_n_s_per_mm,
+        v.removed_d2_n_s3_per_mm3,
+        v.removed_d0_n,
+        v.bins.len(),
+        v.range_min_mm,
+        v.range_max_mm,
+        log = escape(log_name),
+    );
+    for c in &v.criteria {
+        let _ = writeln!(
+            h,
+            "<tr><td>{}</td><td>{}</td><td class=\"num\">{:.3} %</td><td class=\"num\">{:.3} %</td><td>{}</td></tr>",
+            badge(if c.pass { "pass" } else { "fail" }),
+            escape(c.name),
+            c.deviation_percent,
+            c.tolerance_percent,
+            escape(c.what)
+        );
+    }
+    h.push_str("</table>\n<h2>Force curve</h2>\n");
+    h.push_str(&figure(
+        validation_svg,
+        "Left: the measured force with the dynamics removed, binned, and the designed law. \
+         Right: the relative deviation per bin and the tolerance.",
     ));
     h.push_str("</body></html>\n");
     h

@@ -177,10 +177,7 @@ pub fn write(design: &Design, passes: &[Pass], summary: &ToolpathSummary) -> (St
         spec.name
     ));
     w.comment(&format!("camspring run {}", spec.run_id()));
-    w.comment(&format!(
-        "law F = {:.6} N exp({:.6}/mm x) + {:.6} N",
-        law.mu_n, law.k2_per_mm, law.f0_n
-    ));
+    w.comment(&format!("law {}", law.describe()));
     w.comment(&format!(
         "tool 1: {} mm flat end mill, {} rpm",
         m.tool_diameter_mm, m.spindle_rpm

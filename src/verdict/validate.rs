@@ -11,6 +11,9 @@
 //! - `force_rms` and `force_max`: the identified characteristic mu exp(k2 x) + F0 against the
 //!   designed one over the deflections the log covers, RMS and maximum relative deviation.
 //!
+//! A law of another form (a table) has no affine stiffness for the EKF to check; for it
+//! [`validate_curve`] compares the quasi-static force-deflection curve with the design.
+//!
 //! The verdict passes when every criterion does. `validation.svg` shows the stiffness-force
 //! scatter with the designed line, and the estimates converging over time
 //! ([`crate::render::calibration::validation_svg`]).
@@ -18,8 +21,10 @@
 use serde::Serialize;
 
 use crate::estimate::ekf::{idx, EkfRun, State};
-use crate::estimate::identify::{Identification, Param};
-use crate::model::ExpLaw;
+use crate::estimate::identify::{Identification, Param, SensorNoise};
+use crate::estimate::log::CalibrationLog;
+use crate::estimate::sg;
+use crate::model::{ExpLaw, ForceLaw};
 
 /// The spring force the EKF's state implies: sigma / k2 + F0 (the affine relation), with F0
 /// from the parallel filter's `offsets`.
@@ -141,6 +146,170 @@ pub fn validate(
         identified,
         ekf_k2_per_mm: last[idx::K2],
         ekf_k2_per_mm_std: k2_std,
+        range_min_mm: lo,
+        range_max_mm: hi,
+    }
+}
+
+/// One bin of the quasi-static force curve: the measured force with inertia, damping and
+/// Coulomb friction taken out, against the design.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct CurveBin {
+    /// Mean deflection of the bin (mm).
+    pub x_mm: f64,
+    /// Mean measured quasi-static force (N).
+    pub measured_n: f64,
+    /// The designed force there (N).
+    pub designed_n: f64,
+    /// Samples in the bin.
+    pub samples: usize,
+}
+
+/// The verdict on a log against a law of any form (a table included), from the quasi-static
+/// force-deflection curve.
+#[derive(Debug, Clone, Serialize)]
+pub struct CurveValidation {
+    /// All criteria pass.
+    pub pass: bool,
+    /// The criteria.
+    pub criteria: Vec<Criterion>,
+    /// The dynamics taken out of the force: m (N s^2/mm), d0 (N), d1 (N s/mm), d2 (N s^3/mm^3).
+    pub removed_m_n_s2_per_mm: f64,
+    /// Coulomb friction taken out (N).
+    pub removed_d0_n: f64,
+    /// Linear damping taken out (N s/mm).
+    pub removed_d1_n_s_per_mm: f64,
+    /// Cubic damping taken out (N s^3/mm^3).
+    pub removed_d2_n_s3_per_mm3: f64,
+    /// The binned curve.
+    pub bins: Vec<CurveBin>,
+    /// Smallest deflection in the log (mm).
+    pub range_min_mm: f64,
+    /// Largest deflection in the log (mm).
+    pub range_max_mm: f64,
+}
+
+/// Bins of the quasi-static curve over the measured range.
+const CURVE_BINS: usize = 40;
+
+/// Compares a log's quasi-static force-deflection curve with a designed law of any form.
+///
+/// The force is regressed on [1, F_design(x), xdd, xd, xd^3, sgn(xd)] (smoothed with the
+/// identification's Savitzky-Golay kernels): the first two columns absorb an offset or a scale
+/// error of the spring, so the inertia, damping and Coulomb terms are estimated free of them.
+/// Those dynamic terms are taken out of the measured force, which is then averaged in bins of
+/// deflection and compared with the design: `force_rms` and `force_max`, relative.
+pub fn validate_curve(
+    designed: &ForceLaw,
+    log: &CalibrationLog,
+    noise: &SensorNoise,
+    tolerance: f64,
+) -> CurveValidation {
+    use nalgebra::{SMatrix, SVector};
+    let dt = log.dt_s();
+    let diff = sg::Differentiator::for_rate(1.0 / dt);
+    let x = diff.apply(&log.position_mm, dt, sg::POSITION);
+    let xd = diff.apply(&log.position_mm, dt, sg::VELOCITY);
+    let xdd = diff.apply(&log.position_mm, dt, sg::ACCELERATION);
+    let n = x.len();
+    let f = &log.force_n[diff.half..diff.half + n];
+    let band = 3.0
+        * diff
+            .noise_variance(sg::VELOCITY, noise.position_variance_mm2, dt)
+            .sqrt();
+    let sgn: Vec<f64> = xd
+        .iter()
+        .map(|&v| {
+            if v > band {
+                1.0
+            } else if v < -band {
+                -1.0
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let design: Vec<f64> = x.iter().map(|&xi| designed.force_n(xi)).collect();
+    let row =
+        |i: usize| SVector::<f64, 6>::from([1.0, design[i], xdd[i], xd[i], xd[i].powi(3), sgn[i]]);
+    let mut ata = SMatrix::<f64, 6, 6>::zeros();
+    let mut atb = SVector::<f64, 6>::zeros();
+    for (i, &fi) in f.iter().enumerate() {
+        let r = row(i);
+        ata += r * r.transpose();
+        atb += r * fi;
+    }
+    // Scale to unit diagonal before solving; an unexcited column (no motion) stays at zero.
+    let d = SVector::<f64, 6>::from_fn(|k, _| ata[(k, k)].sqrt().max(1e-300));
+    let scaled = SMatrix::<f64, 6, 6>::from_fn(|a, b| ata[(a, b)] / (d[a] * d[b]));
+    let coef = scaled
+        .cholesky()
+        .map(|c| c.solve(&atb.component_div(&d)).component_div(&d))
+        .unwrap_or_else(SVector::zeros);
+    let (m, d1, d2, d0) = (coef[2], coef[3], coef[4], coef[5]);
+    let (lo, hi) = x
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    let width = ((hi - lo) / CURVE_BINS as f64).max(1e-12);
+    let mut sums = vec![(0.0, 0.0, 0usize); CURVE_BINS];
+    for i in 0..n {
+        let k = (((x[i] - lo) / width) as usize).min(CURVE_BINS - 1);
+        let qs = f[i] - (m * xdd[i] + d1 * xd[i] + d2 * xd[i].powi(3) + d0 * sgn[i]);
+        sums[k].0 += x[i];
+        sums[k].1 += qs;
+        sums[k].2 += 1;
+    }
+    let bins: Vec<CurveBin> = sums
+        .into_iter()
+        .filter(|s| s.2 >= 10)
+        .map(|(sx, sf, c)| {
+            let xm = sx / c as f64;
+            CurveBin {
+                x_mm: xm,
+                measured_n: sf / c as f64,
+                designed_n: designed.force_n(xm),
+                samples: c,
+            }
+        })
+        .collect();
+    let (mut sq, mut dsq, mut max) = (0.0_f64, 0.0_f64, 0.0_f64);
+    for b in &bins {
+        sq += (b.measured_n - b.designed_n).powi(2);
+        dsq += b.designed_n.powi(2);
+        max = max.max(((b.measured_n - b.designed_n) / b.designed_n).abs());
+    }
+    let tol = 100.0 * tolerance;
+    let criteria: Vec<Criterion> = [
+        (
+            "force_rms",
+            "RMS of the quasi-static force-deflection curve (inertia, damping and Coulomb friction removed) against the design over the measured range",
+            100.0 * (sq / dsq.max(1e-300)).sqrt(),
+        ),
+        (
+            "force_max",
+            "largest relative deviation of the quasi-static force from the design over the measured range",
+            100.0 * max,
+        ),
+    ]
+    .into_iter()
+    .map(|(name, what, deviation)| Criterion {
+        name,
+        what,
+        deviation_percent: deviation,
+        tolerance_percent: tol,
+        pass: deviation.is_finite() && deviation <= tol && !bins.is_empty(),
+    })
+    .collect();
+    CurveValidation {
+        pass: criteria.iter().all(|c| c.pass),
+        criteria,
+        removed_m_n_s2_per_mm: m,
+        removed_d0_n: d0,
+        removed_d1_n_s_per_mm: d1,
+        removed_d2_n_s3_per_mm3: d2,
+        bins,
         range_min_mm: lo,
         range_max_mm: hi,
     }

@@ -22,7 +22,7 @@ pub fn paper_targets() -> LawTargets {
 
 /// The paper's law, solved exactly.
 pub fn paper_law() -> ExpLaw {
-    solve(&paper_targets()).unwrap().law
+    *solve(&paper_targets()).unwrap().exponential().unwrap()
 }
 
 /// A follower arrangement.

@@ -16,7 +16,7 @@ use serde_json::json;
 
 use camspring::app::{
     self, load_noise_json, parse_state_override, run_design, run_estimate, run_identify, run_noise,
-    run_simulate, run_sweep, run_validate, InitSource, SimulateOptions, EXIT_BAD_INPUT,
+    run_simulate, run_sweep, run_validate, InitSource, SimulateOptions, Verdict, EXIT_BAD_INPUT,
     EXIT_CHECK_FAILED, EXIT_IO, EXIT_OK,
 };
 use camspring::cam::checks::Status;
@@ -24,8 +24,8 @@ use camspring::estimate::log::{parse_column, parse_time_column, ColumnMap};
 use camspring::estimate::sim::{Dynamics, Noise, SimSettings};
 use camspring::export::ExportError;
 use camspring::render::calibration::{
-    estimate_json, format_estimate, format_identification, format_noise, format_validation,
-    identification_json, noise_json,
+    estimate_json, format_curve_validation, format_estimate, format_identification, format_noise,
+    format_validation, identification_json, noise_json,
 };
 use camspring::render::design::format_design;
 use camspring::spec::STARTER_SPEC_TOML;
@@ -369,12 +369,16 @@ fn main() -> ExitCode {
             };
             emit(
                 run_simulate(spec.as_deref(), &opts).and_then(|run| {
+                    let law = match run.law.exponential() {
+                        Some(l) => format!(
+                            "F = {:.6} N * exp({:.6} /mm * x) + {:.6} N",
+                            l.mu_n, l.k2_per_mm, l.f0_n
+                        ),
+                        None => run.law.describe(),
+                    };
                     let text = format!(
-                        "simulated {} samples of F = {:.6} N * exp({:.6} /mm * x) + {:.6} N\n  log:   {}\n  truth: {}\n",
+                        "simulated {} samples of {law}\n  log:   {}\n  truth: {}\n",
                         run.samples,
-                        run.law.mu_n,
-                        run.law.k2_per_mm,
-                        run.law.f0_n,
                         run.log_path.display(),
                         run.truth_path.display()
                     );
@@ -468,8 +472,12 @@ fn main() -> ExitCode {
                     tolerance,
                     svg.as_deref(),
                 )?;
-                let code = if v.pass { EXIT_OK } else { EXIT_CHECK_FAILED };
-                let text = format!("{}  plot: {}\n", format_validation(&v), path.display());
+                let code = if v.pass() { EXIT_OK } else { EXIT_CHECK_FAILED };
+                let verdict = match &v {
+                    Verdict::Law(v) => format_validation(v),
+                    Verdict::Curve(v) => format_curve_validation(v),
+                };
+                let text = format!("{verdict}  plot: {}\n", path.display());
                 Ok(Report::of_checks(text, to_json(&v)?, code))
             })(),
             json,
