@@ -85,7 +85,11 @@ pub fn load_spec(path: Option<&Path>) -> Result<Spec> {
         }),
         Some(p) => {
             let text = read_limited(p, MAX_SPEC_BYTES, "TOML spec")?;
-            Spec::from_toml(&text).map_err(|source| Error::Spec {
+            let base = p
+                .parent()
+                .filter(|d| !d.as_os_str().is_empty())
+                .unwrap_or(Path::new("."));
+            crate::spec::parse_in(&text, base).map_err(|source| Error::Spec {
                 path: p.display().to_string(),
                 source,
             })

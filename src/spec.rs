@@ -8,19 +8,78 @@
 //! default spec is [`DEFAULT_SPEC_TOML`], a copy of `specs/paper.toml`.
 
 use std::collections::HashMap;
+use std::path::Path;
 
 use serde::Deserialize;
 use toml::Spanned;
 
 use crate::model::{
-    ChecksSpec, Coolant, Dialect, ExpLaw, Follower, FrictionCorrection, FrictionSource, Hole,
-    LawSpec, LawTargets, MachiningSpec, Material, OutputSpec, PartSpec, Spec, SpecError,
+    ChecksSpec, Condition, Coolant, Dialect, ExpLaw, Follower, FrictionCorrection, FrictionSource,
+    Hole, LawSpec, LawTargets, MachiningSpec, Material, OutputSpec, PartSpec, Spec, SpecError,
     SpringArrangement, WorkOffset, MATERIALS,
 };
 use crate::units::{parse_quantity, quoted, Dimension, UnitError};
 
 /// The commented starter spec that `camspring init` writes (a copy of `specs/starter.toml`).
 pub const STARTER_SPEC_TOML: &str = include_str!("../specs/starter.toml");
+
+/// The law forms `camspring init --law` can start from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StarterLaw {
+    /// The paper's targets (fmax, fmin, xmax, l0, c0, delta0).
+    Paper,
+    /// Three conditions in the designer's terms.
+    Conditions,
+    /// A given exponential law (mu, k2, f0).
+    Given,
+    /// A table in a CSV file beside the spec.
+    Table,
+}
+
+/// The starter table `camspring init --law table` writes beside the spec: a soft-then-stiff
+/// curve with a knee, in mm and N.
+pub const STARTER_TABLE_CSV: &str =
+    "# x_mm: deflection, force_n: force; strictly increasing x from 0, forces never decreasing\n\
+x_mm,force_n\n0,20\n2,30\n4,42\n6,58\n8,85\n10,130\n12,200\n14,300\n15,370\n";
+
+/// The starter spec with its `[law]` section in the form asked; `table` names the CSV file
+/// the table form reads (written beside the spec).
+pub fn starter_spec(form: StarterLaw, table: &str) -> String {
+    let law = match form {
+        StarterLaw::Paper => return STARTER_SPEC_TOML.to_string(),
+        StarterLaw::Conditions => "[law]\n\
+# Three conditions on F = mu*exp(k2*x) + F0; camspring solves mu, k2 and F0. Each is a force or a\n\
+# stiffness at a deflection, or a stiffness at a force (stiffness is affine in force).\n\
+xmax = \"15 mm\"    # stroke\n\
+conditions = [\n\
+  { at = \"0 mm\",  force = \"40 N\" },\n\
+  { at = \"15 mm\", force = \"800 N\" },\n\
+  { at = \"15 mm\", stiffness = \"180 N/mm\" },\n\
+  # or { force = \"400 N\", stiffness = \"90 N/mm\" }\n\
+]\n"
+        .to_string(),
+        StarterLaw::Given => "[law]\n\
+# A known law F = mu*exp(k2*x) + F0, used as given over the stroke.\n\
+mu = \"1.0 N\"\nk2 = \"0.26 /mm\"\nf0 = \"1.2 N\"\nxmax = \"20 mm\"\n"
+            .to_string(),
+        StarterLaw::Table => format!(
+            "[law]\n\
+# A measured or wanted force curve: a CSV file beside this spec with columns x_<unit>,force_<unit>\n\
+# (x_mm,force_n or x_in,force_lbf), joined by a monotone cubic. xmax defaults to the last row.\n\
+table = \"{table}\"\n\
+# xmax = \"15 mm\"\n"
+        ),
+    };
+    let start = STARTER_SPEC_TOML.find("[law]").unwrap_or(0);
+    let end = STARTER_SPEC_TOML
+        .find("[follower]")
+        .unwrap_or(STARTER_SPEC_TOML.len());
+    format!(
+        "{}{law}\n{}",
+        &STARTER_SPEC_TOML[..start],
+        &STARTER_SPEC_TOML[end..]
+    )
+}
 
 /// The built-in default spec (`specs/paper.toml`): the paper's law on two opposed followers.
 pub const DEFAULT_SPEC_TOML: &str = include_str!("../specs/paper.toml");
@@ -87,6 +146,18 @@ struct RawLaw {
     mu: Q,
     k2: Q,
     f0: Q,
+    conditions: Option<Spanned<Vec<RawCondition>>>,
+    table: Option<Spanned<String>>,
+}
+
+/// `{ at = "15 mm", force = "800 N" }`, `{ at = ..., stiffness = ... }` or
+/// `{ force = ..., stiffness = ... }`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCondition {
+    at: Q,
+    force: Q,
+    stiffness: Q,
 }
 
 #[derive(Debug, Deserialize)]
@@ -179,6 +250,8 @@ struct Written {
 /// Reads raw values, converting units and remembering where each key stood.
 struct Reader<'a> {
     source: &'a str,
+    /// The folder files named in the spec (a law table) are relative to.
+    base: &'a Path,
     written: HashMap<String, Written>,
 }
 
@@ -430,11 +503,19 @@ impl Spec {
     }
 }
 
-/// Reads a spec from TOML text, fills the defaults and validates it.
+/// Reads a spec from TOML text, fills the defaults and validates it; a law table it names is
+/// read relative to the current folder.
 pub fn parse(source: &str) -> Result<Spec, SpecError> {
+    parse_in(source, Path::new("."))
+}
+
+/// Reads a spec from TOML text whose files (a law table) are relative to `base`, usually the
+/// spec file's folder.
+pub fn parse_in(source: &str, base: &Path) -> Result<Spec, SpecError> {
     let raw: RawSpec = toml::from_str(source).map_err(|e| SpecError::Syntax(e.to_string()))?;
     let mut r = Reader {
         source,
+        base,
         written: HashMap::new(),
     };
     let spec = read(&raw, &mut r)?;
@@ -565,24 +646,73 @@ fn read_law(raw: &RawSpec, r: &mut Reader<'_>) -> Result<LawSpec, SpecError> {
         expected: "a [law] table with fmax, fmin, xmax, l0, c0, delta0 (or mu, k2, f0, xmax)"
             .into(),
     })?;
+    // One form only: targets, a given law, conditions or a table.
+    let forms = [
+        (
+            "targets (fmax, fmin, l0, c0, delta0)",
+            [
+                &law_raw.fmax,
+                &law_raw.fmin,
+                &law_raw.l0,
+                &law_raw.c0,
+                &law_raw.delta0,
+            ]
+            .iter()
+            .find_map(|q| q.as_ref().map(|q| q.span().start)),
+        ),
+        (
+            "a given law (mu, k2, f0)",
+            [&law_raw.mu, &law_raw.k2, &law_raw.f0]
+                .iter()
+                .find_map(|q| q.as_ref().map(|q| q.span().start)),
+        ),
+        (
+            "conditions",
+            law_raw.conditions.as_ref().map(|c| c.span().start),
+        ),
+        ("table", law_raw.table.as_ref().map(|t| t.span().start)),
+    ];
+    let given_forms: Vec<(&str, usize)> = forms
+        .iter()
+        .filter_map(|(name, at)| at.map(|a| (*name, a)))
+        .collect();
+    if given_forms.len() > 1 {
+        let names: Vec<&str> = given_forms.iter().map(|f| f.0).collect();
+        return Err(r.invalid(
+            "law",
+            given_forms[1].1,
+            format!("{} together", names.join(" and ")),
+            "one way of stating the law: the paper's targets, a given law mu, k2, f0, three \
+             conditions, or a table (docs/SPEC.md)"
+                .into(),
+        ));
+    }
+    if let Some(conditions) = &law_raw.conditions {
+        let xmax = r.required("law.xmax", &law_raw.xmax, D::Length)?;
+        let conditions = conditions
+            .get_ref()
+            .iter()
+            .enumerate()
+            .map(|(i, c)| read_condition(r, i, c))
+            .collect::<Result<Vec<_>, _>>()?;
+        return Ok(LawSpec::Conditions {
+            conditions,
+            xmax_mm: xmax,
+        });
+    }
+    if let Some(table) = &law_raw.table {
+        let points = read_table(r, table)?;
+        let last = points.last().map_or(0.0, |p| p.0);
+        let xmax = r.or("law.xmax", &law_raw.xmax, D::Length, last)?;
+        return Ok(LawSpec::Table {
+            table: crate::model::TableLaw::new(&points),
+            source: table.get_ref().clone(),
+            xmax_mm: xmax,
+        });
+    }
     let xmax = r.required("law.xmax", &law_raw.xmax, D::Length)?;
     let given = [&law_raw.mu, &law_raw.k2, &law_raw.f0];
-    let targets = [
-        ("fmax", &law_raw.fmax),
-        ("fmin", &law_raw.fmin),
-        ("l0", &law_raw.l0),
-        ("c0", &law_raw.c0),
-        ("delta0", &law_raw.delta0),
-    ];
     if given.iter().any(|k| k.is_some()) {
-        if let Some((name, Some(q))) = targets.iter().find(|(_, q)| q.is_some()) {
-            return Err(r.invalid(
-                &format!("law.{name}"),
-                q.span().start,
-                "a design target next to a given law (mu, k2, f0)".into(),
-                "either the targets fmax, fmin, xmax, l0, c0, delta0 or a given law mu, k2, f0 with xmax, not both".into(),
-            ));
-        }
         return Ok(LawSpec::Given {
             law: ExpLaw {
                 mu_n: r.required("law.mu", &law_raw.mu, D::Force)?,
@@ -600,6 +730,144 @@ fn read_law(raw: &RawSpec, r: &mut Reader<'_>) -> Result<LawSpec, SpecError> {
         c0: r.required("law.c0", &law_raw.c0, D::Dimensionless)?,
         delta0_mm: r.required("law.delta0", &law_raw.delta0, D::Length)?,
     }))
+}
+
+fn read_condition(r: &mut Reader<'_>, i: usize, c: &RawCondition) -> Result<Condition, SpecError> {
+    use Dimension as D;
+    let key = |k: &str| format!("law.conditions[{i}].{k}");
+    match (&c.at, &c.force, &c.stiffness) {
+        (Some(_), Some(_), None) => Ok(Condition::Force {
+            at_mm: r.required(&key("at"), &c.at, D::Length)?,
+            force_n: r.required(&key("force"), &c.force, D::Force)?,
+        }),
+        (Some(_), None, Some(_)) => Ok(Condition::Stiffness {
+            at_mm: r.required(&key("at"), &c.at, D::Length)?,
+            stiffness_n_per_mm: r.required(&key("stiffness"), &c.stiffness, D::Stiffness)?,
+        }),
+        (None, Some(_), Some(_)) => Ok(Condition::StiffnessAtForce {
+            force_n: r.required(&key("force"), &c.force, D::Force)?,
+            stiffness_n_per_mm: r.required(&key("stiffness"), &c.stiffness, D::Stiffness)?,
+        }),
+        _ => Err(SpecError::Invalid {
+            key: format!("law.conditions[{i}]"),
+            line: [&c.at, &c.force, &c.stiffness]
+                .iter()
+                .find_map(|q| q.as_ref().map(|q| r.line(q.span().start))),
+            found: format!(
+                "{{ {}}}",
+                [
+                    ("at", &c.at),
+                    ("force", &c.force),
+                    ("stiffness", &c.stiffness)
+                ]
+                .iter()
+                .filter(|(_, q)| q.is_some())
+                .map(|(n, _)| format!("{n} = ..., "))
+                .collect::<String>()
+            ),
+            expected:
+                "a force or a stiffness at a deflection ({ at, force } or { at, stiffness }), \
+                       or a stiffness at a force ({ force, stiffness })"
+                    .into(),
+        }),
+    }
+}
+
+/// The largest law table read.
+const MAX_TABLE_BYTES: u64 = 4 << 20;
+
+/// Reads the law table named in the spec: a CSV file with a column `x_<length unit>` and a
+/// column `force_<force unit>` (`x_mm,force_n`, `x_in,force_lbf`, ...), `#` comment lines
+/// allowed. Every error names the spec's `law.table` line and the table's line.
+fn read_table(r: &mut Reader<'_>, table: &Spanned<String>) -> Result<Vec<(f64, f64)>, SpecError> {
+    use std::io::Read;
+    let name = table.get_ref();
+    let path = r.base.join(name);
+    let spec_line = r.line(table.span().start);
+    // Validation of the rows names `law.table`: give it this line.
+    r.remember("law.table", table.span().start, quoted(name), String::new());
+    let fail = |found: String, expected: &str| SpecError::Invalid {
+        key: "law.table".into(),
+        line: Some(spec_line),
+        found,
+        expected: expected.to_string(),
+    };
+    let mut text = String::new();
+    std::fs::File::open(&path)
+        .and_then(|f| f.take(MAX_TABLE_BYTES + 1).read_to_string(&mut text))
+        .map_err(|e| {
+            fail(
+                format!("{}: {e}", path.display()),
+                "a readable CSV file (x_mm,force_n), relative to the spec's folder",
+            )
+        })?;
+    if text.len() as u64 > MAX_TABLE_BYTES {
+        return Err(fail(
+            format!(
+                "{}: larger than {} KiB",
+                path.display(),
+                MAX_TABLE_BYTES >> 10
+            ),
+            "a table of a few thousand rows at most",
+        ));
+    }
+    let mut rdr = csv::ReaderBuilder::new()
+        .comment(Some(b'#'))
+        .trim(csv::Trim::All)
+        .from_reader(text.as_bytes());
+    let header = rdr
+        .headers()
+        .map_err(|e| fail(format!("{name}: {e}"), "a header x_mm,force_n"))?
+        .clone();
+    let column = |prefix: &str, dim: Dimension| -> Result<(usize, f64), SpecError> {
+        let found: Vec<(usize, &str)> = header
+            .iter()
+            .enumerate()
+            .filter(|(_, h)| h.to_ascii_lowercase().starts_with(prefix))
+            .collect();
+        let expected = format!(
+            "one column {prefix}<unit> with a unit of {} ({})",
+            dim.describe(),
+            dim.unit_list()
+        );
+        let [(i, h)] = found[..] else {
+            return Err(fail(
+                format!(
+                    "{name} line 1: header {}",
+                    quoted(&header.iter().collect::<Vec<_>>().join(","))
+                ),
+                &expected,
+            ));
+        };
+        let unit = &h[prefix.len()..];
+        dim.units()
+            .iter()
+            .find(|(u, _)| u.eq_ignore_ascii_case(unit))
+            .map(|(_, f)| (i, *f))
+            .ok_or_else(|| fail(format!("{name} line 1: column {}", quoted(h)), &expected))
+    };
+    let (xc, xf) = column("x_", Dimension::Length)?;
+    let (fc, ff) = column("force_", Dimension::Force)?;
+    let mut points = Vec::new();
+    for record in rdr.records() {
+        let record = record.map_err(|e| fail(format!("{name}: {e}"), "rows of two numbers"))?;
+        let line = record.position().map_or(0, |p| p.line());
+        let number = |col: usize, factor: f64| {
+            let cell = record.get(col).unwrap_or("");
+            cell.parse::<f64>()
+                .ok()
+                .map(|v| v * factor)
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| {
+                    fail(
+                        format!("{name} line {line}: {}", quoted(cell)),
+                        "a finite number in every x and force cell",
+                    )
+                })
+        };
+        points.push((number(xc, xf)?, number(fc, ff)?));
+    }
+    Ok(points)
 }
 
 fn read_follower(raw: &RawSpec, r: &mut Reader<'_>) -> Result<Follower, SpecError> {
@@ -821,9 +1089,33 @@ mod tests {
     }
 
     #[test]
+    fn every_starter_form_is_a_valid_spec() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("curve.csv"), STARTER_TABLE_CSV).unwrap();
+        for form in [
+            StarterLaw::Paper,
+            StarterLaw::Conditions,
+            StarterLaw::Given,
+            StarterLaw::Table,
+        ] {
+            let text = starter_spec(form, "curve.csv");
+            let spec = parse_in(&text, dir.path()).unwrap_or_else(|e| panic!("{form:?}: {e}"));
+            let expected = match form {
+                StarterLaw::Paper => "targets",
+                StarterLaw::Conditions => "conditions",
+                StarterLaw::Given => "given",
+                StarterLaw::Table => "table",
+            };
+            assert_eq!(spec.law.form(), expected);
+            crate::design::design(&spec).unwrap_or_else(|e| panic!("{form:?}: {e}"));
+        }
+    }
+
+    #[test]
     fn given_law_and_targets_conflict() {
         let e = err(&MINIMAL.replace("[follower]", "mu = 1\n[follower]"));
-        assert!(e.contains("not both"), "{e}");
+        assert!(e.contains("one way of stating the law"), "{e}");
+        assert!(e.contains("line 8"), "{e}");
     }
 
     #[test]

@@ -411,7 +411,16 @@ fn validate_law(law: &LawSpec) -> Result<(), SpecError> {
             check("law.fmax", t.fmax_n, force, "N")?;
             check("law.fmin", t.fmin_n, force, "N")?;
             check("law.xmax", t.xmax_mm, stroke(), "mm")?;
-            check("law.l0", t.l0_mm, Range::Positive, "mm")?;
+            if !Range::Positive.contains(t.l0_mm) {
+                return Err(invalid(
+                    "law.l0",
+                    found_value(t.l0_mm, "mm"),
+                    "a rest length greater than 0 (the paper's targets hold Fmin at L0 > 0); for a \
+                     force at zero deflection state the law as conditions, e.g. \
+                     conditions = [{ at = \"0 mm\", force = \"40 N\" }, ...] (docs/SPEC.md)"
+                        .into(),
+                ));
+            }
             check("law.c0", t.c0, Range::Positive, "")?;
             check("law.delta0", t.delta0_mm, Range::Positive, "mm")?;
             if t.fmax_n <= t.fmin_n {
@@ -480,8 +489,7 @@ fn validate_law(law: &LawSpec) -> Result<(), SpecError> {
                     "at least two rows (x, force), the first at x = 0".into(),
                 ));
             }
-            // Data row k is line k + 1 of the file (after the header).
-            let row = |k: usize| format!("row {} (line {})", k + 1, k + 2);
+            let row = |k: usize| format!("data row {}", k + 1);
             for (k, (x, f)) in table.points().enumerate() {
                 if !(x.is_finite() && f.is_finite()) {
                     return Err(invalid("law.table", row(k), "finite numbers".into()));

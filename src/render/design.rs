@@ -187,7 +187,7 @@ pub fn force_svg(design: &Design) -> String {
     let pts = |f: &dyn Fn(&RodForce) -> Option<(f64, f64)>| {
         design.forces.iter().filter_map(f).collect::<Vec<_>>()
     };
-    let force = Panel {
+    let mut force = Panel {
         title: "Rod force".into(),
         x_label: "deflection x (mm)".into(),
         y_label: "force F (N)".into(),
@@ -216,6 +216,16 @@ pub fn force_svg(design: &Design) -> String {
         ],
         ..Panel::default()
     };
+    if let crate::model::ForceLaw::Table(t) = law {
+        let xmax = design.xmax_mm();
+        force.series.push(Series {
+            label: "table points".into(),
+            points: t.points().filter(|p| p.0 <= xmax).collect(),
+            color: "#2e7d32",
+            dashed: false,
+            dots: true,
+        });
+    }
     // Loading stiffness from central differences of the predicted loading force.
     let loading_stiffness: Vec<(f64, f64)> = design
         .forces

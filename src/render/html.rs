@@ -159,6 +159,11 @@ pub fn report_html(
     let mut h = String::with_capacity(256 * 1024);
     let name = escape(&summary.name);
     let run = escape(&summary.run_id);
+    let kind = if summary.law.form == "table" {
+        "Tabulated"
+    } else {
+        "Exponential"
+    };
     let status = summary.status.as_str();
     let _ = write!(
         h,
@@ -166,7 +171,7 @@ pub fn report_html(
          <meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\
          <meta name=\"camspring-run\" content=\"{run}\">\
          <title>camspring report: {name}</title><style>{STYLE}</style></head><body>\n\
-         <h1>Exponential cam spring '{name}' {}</h1>\n\
+         <h1>{kind} cam spring '{name}' {}</h1>\n\
          <p>camspring {} design report (run {run}). Every number carries its unit; the same data is in \
          <a href=\"design.json\">design.json</a>.</p>\n\
          <nav><a href=\"#law\">Law</a><a href=\"#curves\">Force</a><a href=\"#profile\">Cam</a>\
@@ -211,12 +216,22 @@ pub fn report_html(
             json_table(&value)
         );
     }
-    h.push_str(
-        "<p>Note on the paper's printed values: the paper prints alpha = 1.3288, which is not a \
-         root of its eq. (5) (the residual there is about -3.9); the law above is the exact root \
-         for this spec, derived in <code>docs/THEORY.md</code> and checked by the \
-         test suite.</p>\n",
-    );
+    if law.form == "targets" {
+        h.push_str(
+            "<p>Note on the paper's printed values: the paper prints alpha = 1.3288, which is not a \
+             root of its eq. (5) (the residual there is about -3.9); the law above is the exact root \
+             for this spec, derived in <code>docs/THEORY.md</code> and checked by the \
+             test suite.</p>\n",
+        );
+    }
+    if let Some(r) = &law.condition_residuals {
+        let cells: Vec<String> = r.iter().map(|v| format!("{v:.1e}")).collect();
+        let _ = writeln!(
+            h,
+            "<p>Solved from three conditions; their relative residuals: {}.</p>",
+            cells.join(", ")
+        );
+    }
 
     // Curves.
     h.push_str("<h2 id=\"curves\">Force and stiffness</h2>\n");

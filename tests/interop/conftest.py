@@ -61,11 +61,14 @@ def design_into(spec_text_or_path, out_dir, fine=True):
     return out_dir / "out", json.loads((out_dir / "out" / "design.json").read_text())
 
 
-@pytest.fixture(scope="session", params=["paper", "ankle", "one-follower"])
+@pytest.fixture(scope="session", params=["paper", "ankle", "one-follower", "knee"])
 def design(request, tmp_path_factory):
     base = tmp_path_factory.mktemp(request.param)
     if request.param == "one-follower":
         return design_into(ONE_FOLLOWER, base)
+    if request.param == "knee":
+        # A tabulated law: the table travels with the spec.
+        (base / "knee.csv").write_text((ROOT / "specs" / "knee.csv").read_text())
     return design_into(ROOT / "specs" / f"{request.param}.toml", base)
 
 

@@ -56,10 +56,15 @@ pub enum Command {
     ///
     /// Examples:
     ///   camspring init my.toml && camspring design my.toml
+    ///   camspring init ankle.toml --law conditions     # force and stiffness where you need them
+    ///   camspring init curve.toml --law table          # also writes curve-table.csv to edit
     #[command(verbatim_doc_comment)]
     Init {
         /// Spec file to write.
         path: PathBuf,
+        /// How the starter states the force law.
+        #[arg(long, value_enum, default_value_t = LawArg::Paper)]
+        law: LawArg,
         /// Overwrite an existing file.
         #[arg(long)]
         force: bool,
@@ -269,6 +274,31 @@ impl From<ProfileArg> for Profile {
             ProfileArg::RampHold => Profile::RampHold,
             ProfileArg::Steps => Profile::Steps,
             ProfileArg::Static => Profile::Static,
+        }
+    }
+}
+
+/// How a starter spec states the force law.
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LawArg {
+    /// The paper's targets (fmax, fmin, xmax, l0, c0, delta0).
+    Paper,
+    /// Three conditions: force or stiffness at a deflection, or stiffness at a force.
+    Conditions,
+    /// A given exponential law (mu, k2, f0).
+    Given,
+    /// A force table in a CSV file beside the spec.
+    Table,
+}
+
+impl From<LawArg> for camspring::spec::StarterLaw {
+    fn from(l: LawArg) -> Self {
+        use camspring::spec::StarterLaw;
+        match l {
+            LawArg::Paper => StarterLaw::Paper,
+            LawArg::Conditions => StarterLaw::Conditions,
+            LawArg::Given => StarterLaw::Given,
+            LawArg::Table => StarterLaw::Table,
         }
     }
 }

@@ -28,7 +28,6 @@ use camspring::render::calibration::{
     format_validation, identification_json, noise_json,
 };
 use camspring::render::design::format_design;
-use camspring::spec::STARTER_SPEC_TOML;
 use camspring::units::Dimension;
 use camspring::{Error, EstimateOptions, SensorNoise};
 
@@ -267,21 +266,37 @@ fn man_pages(out: Option<&Path>) -> Result<Report, Error> {
     Ok(Report::new(text, to_json(&json!({ "written": written }))?))
 }
 
-fn init(path: &Path, force: bool) -> Result<Report, Error> {
-    if path.exists() && !force {
-        return Err(Error::Argument(format!(
-            "{} exists; choose another name or pass --force to overwrite it",
-            path.display()
-        )));
+fn init(path: &Path, force: bool, law: cli::LawArg) -> Result<Report, Error> {
+    use camspring::spec::{starter_spec, StarterLaw, STARTER_TABLE_CSV};
+    let form = StarterLaw::from(law);
+    let stem = path
+        .file_stem()
+        .map_or("spec".into(), |s| s.to_string_lossy().into_owned());
+    let table_name = format!("{stem}-table.csv");
+    let table = (form == StarterLaw::Table).then(|| path.with_file_name(&table_name));
+    for p in std::iter::once(path).chain(table.as_deref()) {
+        if p.exists() && !force {
+            return Err(Error::Argument(format!(
+                "{} exists; choose another name or pass --force to overwrite it",
+                p.display()
+            )));
+        }
     }
-    camspring::write_atomic(path, STARTER_SPEC_TOML.as_bytes())?;
+    if let Some(t) = &table {
+        camspring::write_atomic(t, STARTER_TABLE_CSV.as_bytes())?;
+    }
+    camspring::write_atomic(path, starter_spec(form, &table_name).as_bytes())?;
+    let mut text = format!("wrote {}", path.display());
+    if let Some(t) = &table {
+        text.push_str(&format!(" and {}", t.display()));
+    }
+    text.push_str(&format!(
+        "; edit it, then: camspring design {}\n",
+        path.display()
+    ));
     Ok(Report::new(
-        format!(
-            "wrote {}; edit it, then: camspring design {}\n",
-            path.display(),
-            path.display()
-        ),
-        to_json(&json!({ "spec": path }))?,
+        text,
+        to_json(&json!({ "spec": path, "table": table }))?,
     ))
 }
 
@@ -301,7 +316,12 @@ fn main() -> ExitCode {
             }),
             json,
         ),
-        Command::Init { path, force, json } => emit(init(&path, force), json),
+        Command::Init {
+            path,
+            force,
+            law,
+            json,
+        } => emit(init(&path, force, law), json),
         Command::Sweep {
             spec,
             vary,
