@@ -170,6 +170,35 @@ fn checks_advise_a_table_law_and_the_advice_passes() {
 }
 
 #[test]
+fn an_undercutting_table_cam_gets_preload_advice_that_works() {
+    use camspring::cam::checks::Status;
+    let d = tempfile::tempdir().unwrap();
+    let rows: Vec<(f64, f64)> = (0..=20).map(|i| (0.75 * i as f64, quadratic(0.75 * i as f64))).collect();
+    // No preload and a large roller: the surface folds near x = 0.
+    let follower = "count = 1\nspring_rate = \"20 N/mm\"\nroller_radius = \"5 mm\"";
+    let spec_file = table_spec(d.path(), &rows, follower);
+    let text = std::fs::read_to_string(d.path().join(&spec_file)).unwrap();
+    let spec = camspring::spec::parse_in(&text, d.path()).unwrap();
+    let check = design(&spec)
+        .unwrap()
+        .checks
+        .into_iter()
+        .find(|c| c.name == "undercut")
+        .unwrap();
+    assert_eq!(check.status, Status::Fail, "{check:?}");
+    let preload = check
+        .suggestions
+        .iter()
+        .find(|s| s.key == "follower.preload")
+        .expect("a preload suggestion");
+    let mut fixed = spec.clone();
+    fixed.follower.preload_mm = preload.value;
+    let again = design(&fixed).unwrap();
+    let c = again.checks.iter().find(|c| c.name == "undercut").unwrap();
+    assert_eq!(c.status, Status::Pass, "preload {}: {c:?}", preload.value);
+}
+
+#[test]
 fn simulate_then_validate_passes_the_true_table_and_fails_one_scaled_by_5_percent() {
     let d = tempfile::tempdir().unwrap();
     let rows: Vec<(f64, f64)> = (0..=20)
