@@ -173,7 +173,9 @@ fn checks_advise_a_table_law_and_the_advice_passes() {
 fn an_undercutting_table_cam_gets_preload_advice_that_works() {
     use camspring::cam::checks::Status;
     let d = tempfile::tempdir().unwrap();
-    let rows: Vec<(f64, f64)> = (0..=20).map(|i| (0.75 * i as f64, quadratic(0.75 * i as f64))).collect();
+    let rows: Vec<(f64, f64)> = (0..=20)
+        .map(|i| (0.75 * i as f64, quadratic(0.75 * i as f64)))
+        .collect();
     // No preload and a large roller: the surface folds near x = 0.
     let follower = "count = 1\nspring_rate = \"20 N/mm\"\nroller_radius = \"5 mm\"";
     let spec_file = table_spec(d.path(), &rows, follower);
