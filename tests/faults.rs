@@ -611,3 +611,11 @@ fn the_current_folder_is_not_replaced() {
     assert!(stderr(&out).contains("current folder"));
     assert!(d.path().join("keep.txt").exists());
 }
+
+#[test]
+fn written_paths_are_printed_as_the_user_named_the_folder() {
+    let d = tempfile::tempdir().unwrap();
+    let out = camspring(d.path(), &["design", "-o", "out/p"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("\n    out/p/cam.step\n"), "{text}");
+}

@@ -214,6 +214,7 @@ pub fn write_set(
     files: &[(String, Vec<u8>)],
     owned: &[&str],
 ) -> Result<Vec<PathBuf>, ExportError> {
+    let given = dir.to_path_buf();
     let (dir, parent, name) = resolve(dir)?;
     fs::create_dir_all(&parent).map_err(write_err(&parent))?;
     let _lock = lock(&parent, &name)?;
@@ -246,7 +247,8 @@ pub fn write_set(
         fs::rename(&stage, &dir).map_err(write_err(&dir))?;
         sync_dir(&parent);
     }
-    Ok(files.iter().map(|(n, _)| dir.join(n)).collect())
+    // The paths as the user named the folder.
+    Ok(files.iter().map(|(n, _)| given.join(n)).collect())
 }
 
 #[cfg(test)]
