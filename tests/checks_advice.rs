@@ -28,10 +28,9 @@ fn apply(spec: &Spec, s: &Suggestion) -> Spec {
         "follower.preload" => spec.follower.preload_mm = s.value,
         "follower.spring_rate" => spec.follower.spring_rate_n_per_mm = s.value,
         "follower.roller_radius" => spec.follower.roller_radius_mm = s.value,
-        "part.thickness" => {
-            spec.part.thickness_mm = s.value;
-            spec.part.roller_width_mm = s.value;
-        }
+        // A roller as wide as the plate follows the plate (PartSpec::with_thickness).
+        "part.thickness" => spec.part = spec.part.clone().with_thickness(s.value),
+        "part.roller_width" => spec.part.roller_width_mm = s.value,
         "machining.tool_diameter" => spec.machining.tool_diameter_mm = s.value,
         other => panic!("unexpected suggestion key {other}"),
     }
@@ -47,7 +46,8 @@ fn advice_fixes(spec: Spec, name: &str, expect_keys: &[&str]) {
     assert_eq!(keys, expect_keys, "{broken:?}");
     for s in &broken.suggestions {
         let fixed = check(&apply(&spec, s), name);
-        assert_ne!(fixed.status, Status::Fail, "after {s:?}: {fixed:?}");
+        // Advice aims below the warning band: following it gives a pass, not a warning.
+        assert_eq!(fixed.status, Status::Pass, "after {s:?}: {fixed:?}");
     }
 }
 
@@ -74,12 +74,12 @@ fn pressure_angle_advice_gives_the_spring_rate_or_preload_that_meets_the_limit()
         "pressure_angle",
         &["follower.spring_rate", "follower.preload"],
     );
-    // The advice is tight: 5 % less than the advised spring rate fails again.
+    // The advice is tight: 5 % less than the advised spring rate no longer passes.
     let c = check(&spec, "pressure_angle");
     let ks = c.suggestions[0].value;
     let mut weaker = spec.clone();
     weaker.follower.spring_rate_n_per_mm = 0.95 * ks;
-    assert_eq!(check(&weaker, "pressure_angle").status, Status::Fail);
+    assert_ne!(check(&weaker, "pressure_angle").status, Status::Pass);
 }
 
 #[test]
@@ -99,7 +99,11 @@ fn contact_stress_advice_gives_the_thickness() {
     let mut spec = paper();
     spec.part.thickness_mm = 1.0;
     spec.part.roller_width_mm = 1.0;
-    advice_fixes(spec, "contact_stress", &["part.thickness"]);
+    advice_fixes(
+        spec,
+        "contact_stress",
+        &["part.thickness", "follower.roller_radius"],
+    );
 }
 
 #[test]
@@ -115,4 +119,41 @@ fn the_default_design_passes_every_check() {
     for c in &d.checks {
         assert_eq!(c.status, Status::Pass, "{c:?}");
     }
+}
+
+#[test]
+fn a_narrow_roller_gets_roller_advice_not_a_thicker_plate() {
+    // An ankle-like spring: 800 N at 15 mm on an 8 mm bearing 4 mm wide, in a 10 mm plate.
+    let text = "[law]\nxmax = \"15 mm\"\nconditions = [\n  { at = \"0 mm\", force = \"40 N\" },\n  { at = \"15 mm\", force = \"800 N\" },\n  { at = \"15 mm\", stiffness = \"180 N/mm\" },\n]\n[follower]\ncount = 2\nspring_rate = \"40 N/mm\"\npreload = \"4 mm\"\nroller_radius = \"4 mm\"\n[part]\nthickness = \"10 mm\"\nroller_width = \"4 mm\"\n";
+    let spec = Spec::from_toml(text).unwrap();
+    let c = check(&spec, "contact_stress");
+    assert_eq!(c.status, Status::Fail, "{c:?}");
+    // A roller a little too narrow, in a plate with room: a wider roller is advised.
+    let mut room = spec.clone();
+    room.part.thickness_mm = 40.0;
+    let r = check(&room, "contact_stress");
+    let width = r.suggestions.iter().find(|s| s.key == "part.roller_width");
+    let width = width.unwrap_or_else(|| panic!("{r:?}"));
+    assert_eq!(
+        check(&apply(&room, width), "contact_stress").status,
+        Status::Pass
+    );
+    let keys: Vec<&str> = c.suggestions.iter().map(|s| s.key).collect();
+    assert!(
+        keys.contains(&"part.roller_width") || keys.contains(&"follower.roller_radius"),
+        "{keys:?}"
+    );
+    assert!(
+        !keys.contains(&"part.thickness"),
+        "a thicker plate cannot help: {keys:?}"
+    );
+    for s in &c.suggestions {
+        let fixed = check(&apply(&spec, s), "contact_stress");
+        assert_eq!(fixed.status, Status::Pass, "after {s:?}: {fixed:?}");
+    }
+    // The independent reason: the stress does not move with the plate.
+    let mut thick = spec.clone();
+    thick.part.thickness_mm = 30.0;
+    let same = check(&thick, "contact_stress").value.unwrap();
+    assert!((same / c.value.unwrap() - 1.0).abs() < 1e-9);
 }

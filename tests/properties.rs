@@ -230,3 +230,50 @@ proptest! {
         }
     }
 }
+
+/// Applies a machine-applicable suggestion the way a user edits the spec (a roller as wide as
+/// the plate follows the plate).
+fn apply_suggestion(spec: &Spec, key: &str, value: f64) -> Spec {
+    let mut s = spec.clone();
+    match key {
+        "follower.preload" => s.follower.preload_mm = value,
+        "follower.spring_rate" => s.follower.spring_rate_n_per_mm = value,
+        "follower.roller_radius" => s.follower.roller_radius_mm = value,
+        "part.thickness" => s.part = s.part.clone().with_thickness(value),
+        "part.roller_width" => s.part.roller_width_mm = value,
+        "machining.tool_diameter" => s.machining.tool_diameter_mm = value,
+        other => panic!("unknown suggestion key {other}"),
+    }
+    s
+}
+
+proptest! {
+    // Each case re-designs once per suggestion, and the advice searches re-synthesise the
+    // cam many times: few cases, each a whole round trip.
+    #![proptest_config(ProptestConfig { cases: 24, ..ProptestConfig::default() })]
+
+    /// No suggestion lands on a warning: applied alone, it makes its check pass.
+    #[test]
+    fn every_suggestion_applied_alone_makes_its_check_pass(p in spec_params()) {
+        let Ok(spec) = Spec::from_toml(&toml_of(&p)) else { return Ok(()); };
+        let Ok(d) = design(&spec) else { return Ok(()); };
+        for c in d.checks.iter().filter(|c| c.status != Status::Pass) {
+            for s in &c.suggestions {
+                let fixed = apply_suggestion(&spec, s.key, s.value);
+                // A suggestion may make another check's spec invalid (then it is refused, not
+                // a silent pass); only a design that exists is judged.
+                let Ok(again) = design(&fixed) else { continue; };
+                let after = again.checks.iter().find(|k| k.name == c.name).unwrap();
+                prop_assert_eq!(
+                    after.status,
+                    Status::Pass,
+                    "{} = {} for {}: {:?}",
+                    s.key,
+                    s.value,
+                    c.name,
+                    after
+                );
+            }
+        }
+    }
+}

@@ -8,9 +8,9 @@
 use roots::{find_root_brent, SimpleConvergency};
 use serde::Serialize;
 
-use super::forces::RodForce;
+use super::forces::{predict, ContactModel, RodForce};
 use super::pitch_curve::{synthesize, PitchCurve, SynthesisOptions};
-use super::surface::CamSurface;
+use super::surface::{offset, CamSurface};
 use crate::model::ChecksSpec;
 use crate::model::Follower;
 use crate::model::ForceLaw;
@@ -110,7 +110,11 @@ pub struct CheckInput<'a> {
     /// Limits.
     pub limits: &'a ChecksSpec,
     /// Part thickness (contact length).
-    pub thickness_mm: f64,
+    pub plate_thickness_mm: f64,
+    /// Width of the roller in contact (the contact line is the narrower of the two).
+    pub roller_width_mm: f64,
+    /// The contact model (E* and contact length), for the contact-stress advice.
+    pub contact: ContactModel,
     /// Cutter radius.
     pub tool_radius_mm: f64,
     /// The pitch curve.
@@ -125,6 +129,15 @@ pub struct CheckInput<'a> {
 const ADVICE_MARGIN: f64 = 1.01;
 /// A pitch radius below this multiple of the roller radius is a warning.
 const UNDERCUT_WARN_RATIO: f64 = 1.1;
+
+/// A pressure angle within this of the limit is a warning (degrees).
+pub const PRESSURE_ANGLE_WARN_DEG: f64 = 2.0;
+
+/// A loading margin to jamming within this of the limit is a warning (degrees).
+pub const LOCKING_WARN_DEG: f64 = 5.0;
+
+/// A contact pressure above this fraction of the limit is a warning.
+pub const CONTACT_WARN_FRACTION: f64 = 0.8;
 
 /// Runs all checks.
 pub fn run_checks(input: &CheckInput<'_>) -> Vec<Check> {
@@ -233,15 +246,26 @@ fn round_down(v: f64) -> f64 {
 }
 
 /// Advice to bring the largest pressure angle to at most `target_deg`, by spring rate or preload.
-fn angle_advice(input: &CheckInput<'_>, target_deg: f64) -> Advice {
+/// Advice for a largest pressure angle of at most `target_deg`; with `min_theta_floor_deg`
+/// the smallest angle must also stay at or above it (a stiffer or more preloaded spring lowers
+/// every angle, and a too-small angle near the start cannot return the rod).
+fn angle_advice(
+    input: &CheckInput<'_>,
+    target_deg: f64,
+    min_theta_floor_deg: Option<f64>,
+) -> Advice {
     let f = input.follower;
+    let deficit = |m: AngleMetrics| {
+        let floor = min_theta_floor_deg.map_or(f64::NEG_INFINITY, |fl| fl - m.min_theta_deg);
+        (m.max_theta_deg - target_deg).max(floor)
+    };
     let ks0 = f.spring_rate_n_per_mm;
     let by_rate = first_crossing(ks0, rate_candidates(ks0), |ks| {
-        metrics(input, &f.with_spring_rate(ks)).map_or(f64::NAN, |m| m.max_theta_deg - target_deg)
+        metrics(input, &f.with_spring_rate(ks)).map_or(f64::NAN, deficit)
     });
     let yp0 = f.preload_mm;
     let by_preload = first_crossing(yp0, preload_candidates(yp0, input.xmax_mm), |yp| {
-        metrics(input, &f.with_preload(yp)).map_or(f64::NAN, |m| m.max_theta_deg - target_deg)
+        metrics(input, &f.with_preload(yp)).map_or(f64::NAN, deficit)
     });
     let keep = format!("to keep the pressure angle at or below {target_deg:.2} deg");
     let by_rate = by_rate.map(round_up);
@@ -276,6 +300,104 @@ fn angle_advice(input: &CheckInput<'_>, target_deg: f64) -> Advice {
     Advice { text, suggestions }
 }
 
+/// The peak contact pressure of the cam re-synthesised for `follower` (None: no curve).
+fn peak_contact_mpa(
+    input: &CheckInput<'_>,
+    follower: &Follower,
+    contact: &ContactModel,
+) -> Option<f64> {
+    let pitch = synthesize(input.law, follower, input.xmax_mm, &input.options).ok()?;
+    let surface = offset(
+        &pitch,
+        follower.roller_radius_mm,
+        2.0 * input.options.chord_tolerance_mm,
+    );
+    predict(input.law, follower, &pitch, &surface, contact)
+        .iter()
+        .map(|f| f.contact_stress_mpa)
+        .try_fold(0.0_f64, |m, v| v.map(|v| m.max(v)))
+}
+
+/// What brings the peak pressure `p` below the warning band: a longer contact line (the key
+/// that limits it: the roller's width or the plate's thickness; p scales with 1/sqrt(length)),
+/// or a larger roller (found by re-synthesis).
+fn contact_advice(input: &CheckInput<'_>, p: f64) -> Advice {
+    let target = CONTACT_WARN_FRACTION * input.limits.max_contact_stress_mpa;
+    let length = input.contact.length_mm;
+    let needed = round_up(length * (p / target).powi(2));
+    let (plate, roller) = (input.plate_thickness_mm, input.roller_width_mm);
+    let mut parts = Vec::new();
+    let mut suggestions = Vec::new();
+    if roller < plate {
+        if needed <= plate {
+            parts.push(format!(
+                "use a roller at least {needed} mm wide (the contact is the roller's {roller} mm)"
+            ));
+            suggestions.push(Suggestion {
+                key: "part.roller_width",
+                value: needed,
+                unit: "mm",
+            });
+        } else {
+            parts.push(format!(
+                "make the contact at least {needed} mm long: a roller that wide and a plate that thick"
+            ));
+        }
+    } else if roller > plate && needed > roller {
+        parts.push(format!(
+            "make the contact at least {needed} mm long: a plate that thick and a roller that wide"
+        ));
+    } else {
+        // The plate limits (a roller as wide as the plate follows it).
+        parts.push(format!(
+            "make part.thickness at least {needed} mm (the contact is the plate's {plate} mm; p scales with 1/sqrt(length))"
+        ));
+        suggestions.push(Suggestion {
+            key: "part.thickness",
+            value: needed,
+            unit: "mm",
+        });
+    }
+    let f = input.follower;
+    let r0 = f.roller_radius_mm;
+    if r0 > 0.0 {
+        let candidates = (1..=24).map(|k| r0 * 1.15_f64.powi(k));
+        let by_radius = first_crossing(r0, candidates, |r| {
+            peak_contact_mpa(input, &f.with_roller_radius(r), &input.contact)
+                .map_or(f64::NAN, |pr| pr - target)
+        })
+        .map(round_up);
+        if let Some(r) = by_radius {
+            // The larger roller must still follow the cam and fit the checks it affects.
+            let follows = synthesize(
+                input.law,
+                &f.with_roller_radius(r),
+                input.xmax_mm,
+                &input.options,
+            )
+            .is_ok_and(|pitch| {
+                offset(&pitch, r, 2.0 * input.options.chord_tolerance_mm).is_followable()
+            });
+            if follows {
+                parts.push(format!("use a roller radius of at least {r} mm"));
+                suggestions.push(Suggestion {
+                    key: "follower.roller_radius",
+                    value: r,
+                    unit: "mm",
+                });
+            }
+        }
+    }
+    parts.push(
+        "a stronger cam and roller material (checks.max_contact_stress follows the weaker yield)"
+            .into(),
+    );
+    Advice {
+        text: capitalise(parts.join(", or ")) + ".",
+        suggestions,
+    }
+}
+
 fn capitalise(mut s: String) -> String {
     if let Some(first) = s.get(..1) {
         let upper = first.to_uppercase();
@@ -289,13 +411,14 @@ fn pressure_angle(input: &CheckInput<'_>) -> Check {
     let limit = input.limits.max_pressure_angle_deg;
     let status = if theta > limit {
         Status::Fail
-    } else if theta > limit - 2.0 {
+    } else if theta > limit - PRESSURE_ANGLE_WARN_DEG {
         Status::Warn
     } else {
         Status::Pass
     };
     let (advice, suggestions) =
-        advice_fields((status == Status::Fail).then(|| angle_advice(input, limit)));
+        // The advice aims at a pass, below the warning band.
+        advice_fields((status == Status::Fail).then(|| angle_advice(input, limit - PRESSURE_ANGLE_WARN_DEG, None)));
     Check {
         name: "pressure_angle",
         status,
@@ -335,7 +458,7 @@ fn self_locking(input: &CheckInput<'_>) -> Check {
     };
     let status = if load_fails || unload_fails {
         Status::Fail
-    } else if load_margin < limit + 5.0 || unload_margin < limit {
+    } else if load_margin < limit + LOCKING_WARN_DEG || unload_margin < limit {
         Status::Warn
     } else {
         Status::Pass
@@ -347,7 +470,8 @@ fn self_locking(input: &CheckInput<'_>) -> Check {
     );
     let advice = (status != Status::Pass).then(|| {
         if loading_worse {
-            angle_advice(input, 90.0 - phi - limit)
+            // Less jamming, while the spring still returns the rod with the margin.
+            angle_advice(input, 90.0 - phi - limit - LOCKING_WARN_DEG, Some(phi + limit))
         } else {
             // theta is large near x = 0 with little preload, so the largest acceptable preload
             // is where target - min_theta(yp) changes sign between the current preload and 0.
@@ -356,7 +480,12 @@ fn self_locking(input: &CheckInput<'_>) -> Check {
             let largest = threshold(f.preload_mm, 0.0, |yp| {
                 metrics(input, &f.with_preload(yp)).map_or(f64::NAN, |m| target - m.min_theta_deg)
             });
-            match largest.map(round_down) {
+            // The lower preload must not make loading jam instead.
+            let keeps_loading = |yp: f64| {
+                metrics(input, &f.with_preload(yp))
+                    .is_some_and(|m| m.max_theta_deg <= 90.0 - phi - limit - LOCKING_WARN_DEG)
+            };
+            match largest.map(round_down).filter(|&yp| keeps_loading(yp)) {
                 Some(yp) => Advice {
                     text: format!(
                         "Lower follower.preload from {} to at most {yp} mm, or reduce friction, so that the \
@@ -365,7 +494,7 @@ fn self_locking(input: &CheckInput<'_>) -> Check {
                     ),
                     suggestions: vec![Suggestion { key: "follower.preload", value: yp, unit: "mm" }],
                 },
-                None => Advice::text("Reduce friction: the pressure angle near the start is too small to overcome it."),
+                None => Advice::text("Reduce friction: the pressure angle near the start is too small to overcome it, and no preload alone both returns the rod and keeps loading clear of jamming."),
             }
         }
     });
@@ -516,21 +645,12 @@ fn contact_stress(input: &CheckInput<'_>) -> Check {
     let (p, at) = worst.unwrap_or((0.0, 0.0));
     let status = if p > limit {
         Status::Fail
-    } else if p > 0.8 * limit {
+    } else if p > CONTACT_WARN_FRACTION * limit {
         Status::Warn
     } else {
         Status::Pass
     };
-    let advice = (status != Status::Pass).then(|| {
-        // p ~ 1/sqrt(contact length): the thickness that brings p to 0.8 * limit.
-        let b = round_up(input.thickness_mm * (p / (0.8 * limit)).powi(2));
-        Advice {
-            text: format!(
-                "Make part.thickness at least {b} mm (p scales with 1/sqrt(thickness)), use a larger roller, or a stronger cam material."
-            ),
-            suggestions: vec![Suggestion { key: "part.thickness", value: b, unit: "mm" }],
-        }
-    });
+    let advice = (status != Status::Pass).then(|| contact_advice(input, p));
     let (advice, suggestions) = advice_fields(advice);
     Check {
         name: "contact_stress",
