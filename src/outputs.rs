@@ -6,7 +6,7 @@
 use serde::Serialize;
 use stl_io::Triangle;
 
-use crate::cam::checks::{Check, Status};
+use crate::cam::checks::{l10_strokes, roller_duty, Check, Status};
 use crate::design::Design;
 use crate::law::Residuals;
 use crate::model::{Dialect, ForceLaw, FrictionCorrection, Spec, SpringArrangement};
@@ -234,6 +234,44 @@ pub struct FollowerSummary {
     pub friction_correction: FrictionCorrection,
 }
 
+/// The springs to buy: per physical spring.
+#[derive(Debug, Clone, Serialize)]
+pub struct SpringSummary {
+    /// Physical springs (one per follower, or one shared by two).
+    pub count: u8,
+    /// Rate of each.
+    pub rate_n_per_mm: f64,
+    /// Deflection of each at preload (the stroke's start).
+    pub deflection_at_preload_mm: f64,
+    /// Deflection of each at the full stroke.
+    pub deflection_at_full_stroke_mm: f64,
+    /// Working travel of each over the stroke.
+    pub travel_mm: f64,
+    /// Force of each at preload.
+    pub force_at_preload_n: f64,
+    /// Force of each at the full stroke.
+    pub force_at_full_stroke_n: f64,
+}
+
+/// The rollers to buy: per roller.
+#[derive(Debug, Clone, Serialize)]
+pub struct RollerSummary {
+    /// Rollers.
+    pub count: u8,
+    /// Largest normal load on one roller over the stroke.
+    pub peak_normal_load_n: f64,
+    /// Where.
+    pub peak_at_x_mm: f64,
+    /// ISO 281 mean equivalent load over a stroke (exponent 10/3 over the revolutions).
+    pub mean_equivalent_load_n: f64,
+    /// Revolutions per full stroke (out and back).
+    pub revolutions_per_stroke: f64,
+    /// Roller speed at `follower.stroke_rate` (null when not given).
+    pub speed_rpm: Option<f64>,
+    /// Basic rating life at `follower.roller_dynamic_load` (null when not given).
+    pub l10_strokes: Option<f64>,
+}
+
 /// The profile block of `design.json`.
 #[derive(Debug, Clone, Serialize)]
 pub struct ProfileSummary {
@@ -328,6 +366,10 @@ pub struct DesignSummary {
     pub law: LawSummary,
     /// The followers.
     pub follower: FollowerSummary,
+    /// The springs to buy, per physical spring.
+    pub springs: SpringSummary,
+    /// The rollers to buy, per roller (null for a knife edge).
+    pub rollers: Option<RollerSummary>,
     /// Profile numbers.
     pub profile: ProfileSummary,
     /// Checks.
@@ -438,6 +480,31 @@ pub fn summarize(design: &Design, outputs: &[&str]) -> DesignSummary {
             friction_angle_deg: f.friction_angle_rad().to_degrees(),
             friction_correction: f.friction_correction,
         },
+        springs: {
+            let (count, at_preload) = f.springs(0.0);
+            let (_, at_full) = f.springs(design.pitch_curve.lift_mm());
+            SpringSummary {
+                count,
+                rate_n_per_mm: f.spring_rate_n_per_mm,
+                deflection_at_preload_mm: at_preload,
+                deflection_at_full_stroke_mm: at_full,
+                travel_mm: at_full - at_preload,
+                force_at_preload_n: f.spring_rate_n_per_mm * at_preload,
+                force_at_full_stroke_n: f.spring_rate_n_per_mm * at_full,
+            }
+        },
+        rollers: roller_duty(f, &design.cam_surface, &design.forces).map(|d| RollerSummary {
+            count: f.count,
+            peak_normal_load_n: d.peak_load_n,
+            peak_at_x_mm: d.peak_at_x_mm,
+            mean_equivalent_load_n: d.mean_load_n,
+            revolutions_per_stroke: d.revolutions_per_stroke,
+            speed_rpm: f
+                .bearing
+                .stroke_rate_hz
+                .map(|hz| d.revolutions_per_stroke * hz * 60.0),
+            l10_strokes: f.bearing.dynamic_load_n.map(|c| l10_strokes(c, &d)),
+        }),
         profile: ProfileSummary {
             xmax_mm: xmax,
             lift_mm: design.pitch_curve.lift_mm(),

@@ -173,6 +173,9 @@ struct RawFollower {
     pin_radius: Q,
     rolling_resistance: Q,
     friction_correction: Option<Spanned<String>>,
+    roller_dynamic_load: Q,
+    duty_strokes: Q,
+    stroke_rate: Q,
 }
 
 /// A material: a preset name, or a table { youngs_modulus, poisson_ratio, yield_strength }.
@@ -934,6 +937,15 @@ fn read_follower(raw: &RawSpec, r: &mut Reader<'_>) -> Result<Follower, SpecErro
         ],
         FrictionCorrection::Loading,
     )?;
+    let bearing = crate::model::RollerBearing {
+        dynamic_load_n: r.optional(
+            "follower.roller_dynamic_load",
+            &f.roller_dynamic_load,
+            D::Force,
+        )?,
+        duty_strokes: r.optional("follower.duty_strokes", &f.duty_strokes, D::Dimensionless)?,
+        stroke_rate_hz: r.optional("follower.stroke_rate", &f.stroke_rate, D::Frequency)?,
+    };
     Ok(Follower {
         count,
         arrangement,
@@ -942,6 +954,7 @@ fn read_follower(raw: &RawSpec, r: &mut Reader<'_>) -> Result<Follower, SpecErro
         roller_radius_mm: roller_radius,
         friction,
         friction_correction,
+        bearing,
     })
 }
 

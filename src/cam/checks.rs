@@ -141,13 +141,134 @@ pub const CONTACT_WARN_FRACTION: f64 = 0.8;
 
 /// Runs all checks.
 pub fn run_checks(input: &CheckInput<'_>) -> Vec<Check> {
-    vec![
+    let mut checks = vec![
         pressure_angle(input),
         self_locking(input),
         undercut(input),
         cutter_fit(input),
         contact_stress(input),
-    ]
+    ];
+    checks.extend(roller_life(input));
+    checks
+}
+
+/// A life within this factor of the duty is a warning.
+pub const LIFE_WARN_FACTOR: f64 = 2.0;
+
+/// What the roller sees over one stroke: the ISO 281 mean load (exponent 10/3 over the
+/// revolutions) and the revolutions of a full stroke (out and back).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct RollerDuty {
+    /// The largest normal load on one roller (N) and where (mm).
+    pub peak_load_n: f64,
+    /// Where the peak is (mm).
+    pub peak_at_x_mm: f64,
+    /// ISO 281 mean equivalent load over a stroke (N).
+    pub mean_load_n: f64,
+    /// Roller revolutions per full stroke (out and back).
+    pub revolutions_per_stroke: f64,
+}
+
+/// The roller's duty over a stroke, from the normal loads and the surface it rolls on (None
+/// for a knife edge or an unbounded load).
+pub fn roller_duty(
+    follower: &Follower,
+    surface: &CamSurface,
+    forces: &[RodForce],
+) -> Option<RollerDuty> {
+    let r = follower.roller_radius_mm;
+    if r <= 0.0 || forces.is_empty() || surface.points.len() != forces.len() {
+        return None;
+    }
+    let (mut peak, mut at, mut sum_p, mut sum_s) = (0.0_f64, 0.0, 0.0, 0.0);
+    for (w, f) in surface.points.windows(2).zip(forces.windows(2)) {
+        let ds = (w[1].x_mm - w[0].x_mm).hypot(w[1].y_mm - w[0].y_mm);
+        let (a, b) = (f[0].contact_normal_n?, f[1].contact_normal_n?);
+        for (load, x) in [(a, f[0].x_mm), (b, f[1].x_mm)] {
+            if load > peak {
+                peak = load;
+                at = x;
+            }
+        }
+        sum_p += 0.5 * (a.powf(10.0 / 3.0) + b.powf(10.0 / 3.0)) * ds;
+        sum_s += ds;
+    }
+    (sum_s > 0.0).then(|| RollerDuty {
+        peak_load_n: peak,
+        peak_at_x_mm: at,
+        mean_load_n: (sum_p / sum_s).powf(0.3),
+        revolutions_per_stroke: 2.0 * sum_s / (std::f64::consts::TAU * r),
+    })
+}
+
+/// L10 life in strokes of a bearing with dynamic load rating `c_n` under `duty` (ISO 281 basic
+/// rating life of a roller bearing: (C/P)^(10/3) million revolutions).
+pub fn l10_strokes(c_n: f64, duty: &RollerDuty) -> f64 {
+    (c_n / duty.mean_load_n).powf(10.0 / 3.0) * 1e6 / duty.revolutions_per_stroke
+}
+
+/// The roller-bearing life check, when the spec gives the bearing's rating and the duty.
+fn roller_life(input: &CheckInput<'_>) -> Option<Check> {
+    let b = input.follower.bearing;
+    let (c, strokes) = (b.dynamic_load_n?, b.duty_strokes?);
+    let duty = roller_duty(input.follower, input.surface, input.forces);
+    let Some(duty) = duty else {
+        return Some(Check {
+            name: "roller_life",
+            status: Status::Fail,
+            value: None,
+            limit: strokes,
+            unit: "strokes",
+            at_x_mm: None,
+            message: "no roller life: a knife-edge follower or an unbounded contact load".into(),
+            advice: Some(
+                "Use a roller (roller_radius > 0) and clear the other checks first.".into(),
+            ),
+            suggestions: Vec::new(),
+        });
+    };
+    let life = l10_strokes(c, &duty);
+    let status = if life < strokes {
+        Status::Fail
+    } else if life < LIFE_WARN_FACTOR * strokes {
+        Status::Warn
+    } else {
+        Status::Pass
+    };
+    let advice = (status != Status::Pass).then(|| {
+        let needed = round_up(
+            duty.mean_load_n
+                * (LIFE_WARN_FACTOR * strokes * duty.revolutions_per_stroke / 1e6).powf(0.3),
+        );
+        Advice {
+            text: format!(
+                "Use a roller bearing with a dynamic load rating C of at least {needed} N \
+                 ({LIFE_WARN_FACTOR} x the duty of {strokes:.0} strokes at a mean load of {:.1} N), \
+                 or lower the contact load (a larger roller, a lower pressure angle).",
+                duty.mean_load_n
+            ),
+            suggestions: vec![Suggestion {
+                key: "follower.roller_dynamic_load",
+                value: needed,
+                unit: "N",
+            }],
+        }
+    });
+    let (advice, suggestions) = advice_fields(advice);
+    Some(Check {
+        name: "roller_life",
+        status,
+        value: Some(life),
+        limit: strokes,
+        unit: "strokes",
+        at_x_mm: Some(duty.peak_at_x_mm),
+        message: format!(
+            "roller bearing L10 life {life:.3e} strokes (C = {c} N, ISO 281 mean load {:.1} N, peak {:.1} N at x = {:.3} mm, {:.2} revolutions per stroke); duty {strokes:.3e} strokes",
+            duty.mean_load_n, duty.peak_load_n, duty.peak_at_x_mm, duty.revolutions_per_stroke
+        ),
+        advice,
+        suggestions,
+    })
 }
 
 /// Angle extremes of a re-synthesised curve, for the advice searches.

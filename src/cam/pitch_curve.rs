@@ -542,6 +542,7 @@ mod tests {
             roller_radius_mm: 0.0,
             friction: FrictionSource::Coefficient { coefficient: 0.1 },
             friction_correction: FrictionCorrection::Unloading,
+            bearing: Default::default(),
         };
         let opts = SynthesisOptions {
             chord_tolerance_mm: 1e-3,

@@ -90,6 +90,19 @@ pub struct Follower {
     pub friction: FrictionSource,
     /// Which stroke the pitch curve is corrected for.
     pub friction_correction: FrictionCorrection,
+    /// The roller's bearing and duty, for the life check (all optional).
+    pub bearing: RollerBearing,
+}
+
+/// A roller's bearing and its duty: what the L10 life check needs.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct RollerBearing {
+    /// Basic dynamic load rating C of the roller's bearing (ISO 281), N.
+    pub dynamic_load_n: Option<f64>,
+    /// Strokes (load and return) the transmission must survive.
+    pub duty_strokes: Option<f64>,
+    /// Strokes per second in use (for the roller speed), Hz.
+    pub stroke_rate_hz: Option<f64>,
 }
 
 impl Follower {
@@ -105,6 +118,7 @@ impl Follower {
             roller_radius_mm,
             friction: FrictionSource::Coefficient { coefficient: 0.0 },
             friction_correction: FrictionCorrection::Loading,
+            bearing: RollerBearing::default(),
         }
     }
 
@@ -139,6 +153,16 @@ impl Follower {
         Follower {
             friction_correction,
             ..*self
+        }
+    }
+
+    /// The physical springs: how many, and how far one is deflected when every follower has
+    /// risen by `y_mm` (its force is the rate times this). Per-follower springs are compressed
+    /// by Y + Yp; one spring shared by two opposed followers is stretched by 2 (Y + Yp).
+    pub fn springs(&self, y_mm: f64) -> (u8, f64) {
+        match self.arrangement {
+            SpringArrangement::PerFollower => (self.count, y_mm + self.preload_mm),
+            SpringArrangement::Shared => (1, 2.0 * (y_mm + self.preload_mm)),
         }
     }
 

@@ -29,7 +29,9 @@ pub mod part;
 
 use serde::Serialize;
 
-pub use follower::{Follower, FrictionCorrection, FrictionSource, SpringArrangement, MAX_FRICTION};
+pub use follower::{
+    Follower, FrictionCorrection, FrictionSource, RollerBearing, SpringArrangement, MAX_FRICTION,
+};
 pub use law::{Condition, ExpLaw, ForceLaw, LawSpec, LawTargets, TableLaw};
 pub use machining::{Coolant, Dialect, MachiningSpec, WorkOffset};
 pub use part::{Hole, Material, PartSpec, MATERIALS};
@@ -589,6 +591,31 @@ fn validate_follower(f: &Follower) -> Result<(), SpecError> {
     let length = Range::Closed(0.0, MAX_LENGTH_MM);
     check("follower.preload", f.preload_mm, length, "mm")?;
     check("follower.roller_radius", f.roller_radius_mm, length, "mm")?;
+    let b = &f.bearing;
+    for (key, value, range, unit) in [
+        (
+            "follower.roller_dynamic_load",
+            b.dynamic_load_n,
+            Range::Open(0.0, MAX_FORCE_N),
+            "N",
+        ),
+        (
+            "follower.duty_strokes",
+            b.duty_strokes,
+            Range::Open(0.0, 1e15),
+            "",
+        ),
+        (
+            "follower.stroke_rate",
+            b.stroke_rate_hz,
+            Range::Open(0.0, 1e4),
+            "Hz",
+        ),
+    ] {
+        if let Some(v) = value {
+            check(key, v, range, unit)?;
+        }
+    }
     let friction_range = Range::HalfOpen(0.0, MAX_FRICTION);
     match f.friction {
         FrictionSource::Coefficient { coefficient } => {

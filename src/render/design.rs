@@ -67,6 +67,31 @@ pub fn format_design(s: &DesignSummary, written: &[PathBuf]) -> String {
         "  follower {} x roller r = {:.4} mm, springs {:.4} N/mm ({}), k_eff = {:.4} N/mm, preload {:.4} mm, friction {:.4} ({} correction)",
         f.count, f.roller_radius_mm, f.spring_rate_n_per_mm, f.spring, f.k_eff_n_per_mm, f.preload_mm, f.friction_coefficient, f.friction_correction
     );
+    let sp = &s.springs;
+    let _ = writeln!(
+        o,
+        "  springs  {} x {:.4} N/mm: {:.3} N at preload ({:.3} mm), {:.3} N at full stroke ({:.3} mm), travel {:.3} mm each",
+        sp.count,
+        sp.rate_n_per_mm,
+        sp.force_at_preload_n,
+        sp.deflection_at_preload_mm,
+        sp.force_at_full_stroke_n,
+        sp.deflection_at_full_stroke_mm,
+        sp.travel_mm
+    );
+    if let Some(r) = &s.rollers {
+        let mut line = format!(
+            "  rollers  {} x: peak normal load {:.2} N at x = {:.3} mm, ISO 281 mean {:.2} N, {:.2} revolutions per stroke",
+            r.count, r.peak_normal_load_n, r.peak_at_x_mm, r.mean_equivalent_load_n, r.revolutions_per_stroke
+        );
+        if let Some(rpm) = r.speed_rpm {
+            line.push_str(&format!(", {rpm:.1} rpm"));
+        }
+        if let Some(l) = r.l10_strokes {
+            line.push_str(&format!(", L10 {l:.3e} strokes"));
+        }
+        let _ = writeln!(o, "{line}");
+    }
     let p = &s.profile;
     let _ = writeln!(
         o,

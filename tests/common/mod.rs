@@ -42,6 +42,7 @@ pub fn follower(
         roller_radius_mm: roller,
         friction: FrictionSource::Coefficient { coefficient: mu },
         friction_correction: corr,
+        bearing: Default::default(),
     }
 }
 
