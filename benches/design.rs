@@ -40,9 +40,31 @@ fn benches(c: &mut Criterion) {
     c.bench_function("design_outputs_in_memory", |b| {
         b.iter(|| {
             let s = serde_json::to_vec_pretty(&summarize(&d, &[])).unwrap();
-            (s, profile_csv(&d).unwrap(), force_svg(&d), profile_svg(&d))
+            (
+                s,
+                profile_csv(&d).unwrap(),
+                force_svg(&d, None),
+                profile_svg(&d),
+            )
         })
     });
+    // The tolerance band: 10 000 builds through the forward model (issue: under 1 s on 2 cores).
+    let tolerances = camspring::model::TolerancesSpec {
+        samples: 10_000,
+        ..Default::default()
+    };
+    let mut group = c.benchmark_group("tolerance_band");
+    group.sample_size(10);
+    group.bench_function("10000 builds, 41 stations", |b| {
+        b.iter(|| {
+            camspring::cam::tolerance::force_band(
+                black_box(&d.pitch_curve),
+                &spec.follower,
+                &tolerances,
+            )
+        })
+    });
+    group.finish();
     c.bench_function("part_build (outline, B-spline fit, area)", |b| {
         b.iter(|| build(black_box(&d)).unwrap())
     });

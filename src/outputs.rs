@@ -7,6 +7,7 @@ use serde::Serialize;
 use stl_io::Triangle;
 
 use crate::cam::checks::{l10_strokes, roller_duty, Check, Status};
+use crate::cam::tolerance::{force_band, ForceBand};
 use crate::design::Design;
 use crate::law::Residuals;
 use crate::model::{Dialect, ForceLaw, FrictionCorrection, Spec, SpringArrangement};
@@ -139,6 +140,11 @@ pub fn plan(design: &Design) -> Result<Outputs, PlanError> {
         },
     };
     let mut summary = summarize(design, &names);
+    summary.force_band = Some(force_band(
+        &design.pitch_curve,
+        &spec.follower,
+        &spec.tolerances,
+    ));
     summary.part = part.as_ref().map(|p| part_summary(spec, p));
     summary.part_refused = part_refused;
     summary.gcode = gcode;
@@ -370,6 +376,9 @@ pub struct DesignSummary {
     pub springs: SpringSummary,
     /// The rollers to buy, per roller (null for a knife edge).
     pub rollers: Option<RollerSummary>,
+    /// The 95 % band of the rod force over builds within the spec's tolerances (null until
+    /// [`plan`] computes it).
+    pub force_band: Option<ForceBand>,
     /// Profile numbers.
     pub profile: ProfileSummary,
     /// Checks.
@@ -505,6 +514,7 @@ pub fn summarize(design: &Design, outputs: &[&str]) -> DesignSummary {
                 .map(|hz| d.revolutions_per_stroke * hz * 60.0),
             l10_strokes: f.bearing.dynamic_load_n.map(|c| l10_strokes(c, &d)),
         }),
+        force_band: None,
         profile: ProfileSummary {
             xmax_mm: xmax,
             lift_mm: design.pitch_curve.lift_mm(),

@@ -16,7 +16,7 @@ use toml::Spanned;
 use crate::model::{
     ChecksSpec, Condition, Coolant, Dialect, ExpLaw, Follower, FrictionCorrection, FrictionSource,
     Hole, LawSpec, LawTargets, MachiningSpec, Material, OutputSpec, PartSpec, Spec, SpecError,
-    SpringArrangement, WorkOffset, MATERIALS,
+    SpringArrangement, TolerancesSpec, WorkOffset, MATERIALS,
 };
 use crate::units::{parse_quantity, quoted, Dimension, UnitError};
 
@@ -132,6 +132,20 @@ struct RawSpec {
     machining: Option<RawMachining>,
     checks: Option<RawChecks>,
     output: Option<RawOutput>,
+    tolerances: Option<RawTolerances>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawTolerances {
+    spring_rate: Q,
+    preload: Q,
+    roller_radius: Q,
+    profile: Q,
+    friction_min: Q,
+    friction_max: Q,
+    samples: Option<Spanned<i64>>,
+    seed: Option<Spanned<i64>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -631,6 +645,39 @@ fn read(raw: &RawSpec, r: &mut Reader<'_>) -> Result<Spec, SpecError> {
             defaults.stl_tolerance_mm,
         )?,
     };
+    let default_tol = RawTolerances::default();
+    let t = raw.tolerances.as_ref().unwrap_or(&default_tol);
+    let d = TolerancesSpec::default();
+    let tolerances = TolerancesSpec {
+        spring_rate_percent: r.or(
+            "tolerances.spring_rate",
+            &t.spring_rate,
+            D::Percent,
+            d.spring_rate_percent,
+        )?,
+        preload_mm: r.or("tolerances.preload", &t.preload, D::Length, d.preload_mm)?,
+        roller_radius_mm: r.or(
+            "tolerances.roller_radius",
+            &t.roller_radius,
+            D::Length,
+            d.roller_radius_mm,
+        )?,
+        profile_mm: r.or("tolerances.profile", &t.profile, D::Length, d.profile_mm)?,
+        friction_min: r.or(
+            "tolerances.friction_min",
+            &t.friction_min,
+            D::Dimensionless,
+            d.friction_min,
+        )?,
+        friction_max: r.or(
+            "tolerances.friction_max",
+            &t.friction_max,
+            D::Dimensionless,
+            d.friction_max,
+        )?,
+        samples: r.count("tolerances.samples", &t.samples, usize::MAX, d.samples),
+        seed: r.count("tolerances.seed", &t.seed, u64::MAX, d.seed),
+    };
     Ok(Spec {
         name,
         law,
@@ -639,6 +686,7 @@ fn read(raw: &RawSpec, r: &mut Reader<'_>) -> Result<Spec, SpecError> {
         machining,
         checks,
         output,
+        tolerances,
     })
 }
 

@@ -28,6 +28,8 @@ pub enum Dimension {
     Time,
     /// Frequency (sampling rate); default Hz.
     Frequency,
+    /// A percentage; default %.
+    Percent,
     /// A pure number (ratios, coefficients).
     Dimensionless,
 }
@@ -49,6 +51,7 @@ impl Dimension {
             Dimension::RotationalSpeed => "rpm",
             Dimension::Time => "s",
             Dimension::Frequency => "Hz",
+            Dimension::Percent => "%",
             Dimension::Dimensionless => "",
         }
     }
@@ -66,6 +69,7 @@ impl Dimension {
             Dimension::RotationalSpeed => "a spindle speed such as \"8000 rpm\"",
             Dimension::Time => "a duration such as \"300s\"",
             Dimension::Frequency => "a rate such as \"100Hz\"",
+            Dimension::Percent => "a percentage such as \"10 %\"",
             Dimension::Dimensionless => "a plain number",
         }
     }
@@ -146,6 +150,7 @@ impl Dimension {
                 ("h", 3600.0),
             ],
             Dimension::Frequency => &[("Hz", 1.0), ("hz", 1.0), ("kHz", 1e3), ("khz", 1e3)],
+            Dimension::Percent => &[("%", 1.0)],
             Dimension::Dimensionless => &[],
         }
     }

@@ -8,3 +8,4 @@ pub mod checks;
 pub mod forces;
 pub mod pitch_curve;
 pub mod surface;
+pub mod tolerance;

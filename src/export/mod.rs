@@ -180,14 +180,16 @@ fn render_file(design: &Design, outputs: &Outputs, name: &str) -> Result<Vec<u8>
         "design.json" => serde_json::to_vec_pretty(&outputs.summary)
             .map_err(|e| encode("design.json")(e.to_string()))?,
         "report.html" => {
-            let force = render::design::force_svg(design);
+            let force = render::design::force_svg(design, outputs.summary.force_band.as_ref());
             let profile = render::design::profile_svg(design);
             render::html::report_html(design, &outputs.summary, &force, &profile).into_bytes()
         }
         "profile.csv" => {
             render::design::profile_csv(design).map_err(|e| encode("profile.csv")(e.to_string()))?
         }
-        "force.svg" => render::design::force_svg(design).into_bytes(),
+        "force.svg" => {
+            render::design::force_svg(design, outputs.summary.force_band.as_ref()).into_bytes()
+        }
         "profile.svg" => render::design::profile_svg(design).into_bytes(),
         "cam.step" => step::step_text(&part()?.part, &spec.name, &outputs.summary.run_id)
             .map_err(|e| encode("cam.step")(e.to_string()))?

@@ -161,6 +161,48 @@ impl Default for ChecksSpec {
     }
 }
 
+/// How far a built spring may be from the design: the tolerances of its parts. Each is
+/// drawn uniformly within its range by the Monte Carlo of [`crate::cam::tolerance`].
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TolerancesSpec {
+    /// Spring rate, +- percent of the rate (springs: +-10 %).
+    pub spring_rate_percent: f64,
+    /// Preload, +- mm (shims: +-0.1 mm).
+    pub preload_mm: f64,
+    /// Roller radius, +- mm.
+    pub roller_radius_mm: f64,
+    /// Cam profile, +- mm normal to the surface (milling: +-0.02 mm).
+    pub profile_mm: f64,
+    /// Smallest contact friction coefficient of a build.
+    pub friction_min: f64,
+    /// Largest contact friction coefficient of a build.
+    pub friction_max: f64,
+    /// Builds drawn.
+    pub samples: usize,
+    /// Seed of the draw (the band is reproducible).
+    pub seed: u64,
+}
+
+impl Default for TolerancesSpec {
+    /// Catalogue springs (+-10 %), shims (+-0.1 mm), a bearing's outer ring (+-0.01 mm), a
+    /// milled profile (+-0.02 mm), friction from 0.005 to 0.05, 2000 builds, seed 1.
+    fn default() -> Self {
+        TolerancesSpec {
+            spring_rate_percent: 10.0,
+            preload_mm: 0.1,
+            roller_radius_mm: 0.01,
+            profile_mm: 0.02,
+            friction_min: 0.005,
+            friction_max: 0.05,
+            samples: 2000,
+            seed: 1,
+        }
+    }
+}
+
+/// The most builds a tolerance band draws.
+pub const MAX_TOLERANCE_SAMPLES: usize = 1_000_000;
+
 /// Output sampling settings.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct OutputSpec {
@@ -200,6 +242,8 @@ pub struct Spec {
     pub checks: ChecksSpec,
     /// Output settings.
     pub output: OutputSpec,
+    /// Tolerances of the build, for the force band.
+    pub tolerances: TolerancesSpec,
 }
 
 /// Builds a [`Spec`] in code: the law and the followers are required, every other section
@@ -360,6 +404,7 @@ impl Spec {
                 machining: MachiningSpec::default(),
                 checks: ChecksSpec::default(),
                 output: OutputSpec::default(),
+                tolerances: TolerancesSpec::default(),
             },
             checks_given: false,
         }
@@ -398,7 +443,8 @@ impl Spec {
         validate_part(&self.part)?;
         validate_machining(&self.machining, &self.part)?;
         validate_checks(&self.checks)?;
-        validate_output(&self.output)
+        validate_output(&self.output)?;
+        validate_tolerances(&self.tolerances, &self.follower)
     }
 }
 
@@ -849,6 +895,53 @@ fn validate_checks(c: &ChecksSpec) -> Result<(), SpecError> {
         Range::Positive,
         "MPa",
     )
+}
+
+fn validate_tolerances(t: &TolerancesSpec, f: &Follower) -> Result<(), SpecError> {
+    check(
+        "tolerances.spring_rate",
+        t.spring_rate_percent,
+        Range::HalfOpen(0.0, 100.0),
+        "%",
+    )?;
+    check(
+        "tolerances.preload",
+        t.preload_mm,
+        Range::Closed(0.0, MAX_LENGTH_MM),
+        "mm",
+    )?;
+    check(
+        "tolerances.roller_radius",
+        t.roller_radius_mm,
+        Range::Closed(0.0, f.roller_radius_mm),
+        "mm",
+    )?;
+    check(
+        "tolerances.profile",
+        t.profile_mm,
+        Range::Closed(0.0, MAX_LENGTH_MM),
+        "mm",
+    )?;
+    check(
+        "tolerances.friction_min",
+        t.friction_min,
+        Range::HalfOpen(0.0, MAX_FRICTION),
+        "",
+    )?;
+    check(
+        "tolerances.friction_max",
+        t.friction_max,
+        Range::HalfOpen(t.friction_min, MAX_FRICTION),
+        "",
+    )?;
+    if !(1..=MAX_TOLERANCE_SAMPLES).contains(&t.samples) {
+        return Err(invalid(
+            "tolerances.samples",
+            t.samples.to_string(),
+            format!("from 1 to {MAX_TOLERANCE_SAMPLES} builds"),
+        ));
+    }
+    Ok(())
 }
 
 fn validate_output(o: &OutputSpec) -> Result<(), SpecError> {

@@ -6,6 +6,7 @@ use std::path::PathBuf;
 
 use super::plot::{self, Panel, Series};
 use crate::cam::forces::RodForce;
+use crate::cam::tolerance::ForceBand;
 use crate::design::Design;
 use crate::outputs::DesignSummary;
 use crate::part::Part;
@@ -91,6 +92,22 @@ pub fn format_design(s: &DesignSummary, written: &[PathBuf]) -> String {
             line.push_str(&format!(", L10 {l:.3e} strokes"));
         }
         let _ = writeln!(o, "{line}");
+    }
+    if let Some(b) = &s.force_band {
+        let end = |v: &[Option<f64>]| {
+            v.last()
+                .copied()
+                .flatten()
+                .map_or("-".into(), |v| format!("{v:.2}"))
+        };
+        let top = b.sensitivity.first().map_or("-", |s| s.tolerance);
+        let _ = writeln!(
+            o,
+            "  band     95 % of {} builds load {} ... {} N at Xmax; largest share: {top}",
+            b.samples,
+            end(&b.loading_lo_n),
+            end(&b.loading_hi_n)
+        );
     }
     let p = &s.profile;
     let _ = writeln!(
@@ -207,7 +224,7 @@ pub fn profile_csv(design: &Design) -> Result<Vec<u8>, csv::Error> {
 }
 
 /// `force.svg`: force against deflection (design, loading, unloading) and stiffness against force.
-pub fn force_svg(design: &Design) -> String {
+pub fn force_svg(design: &Design, band: Option<&ForceBand>) -> String {
     let law = &design.law.law;
     let pts = |f: &dyn Fn(&RodForce) -> Option<(f64, f64)>| {
         design.forces.iter().filter_map(f).collect::<Vec<_>>()
@@ -241,6 +258,41 @@ pub fn force_svg(design: &Design) -> String {
         ],
         ..Panel::default()
     };
+    if let Some(b) = band {
+        let line = |ys: Vec<Option<f64>>| -> Vec<(f64, f64)> {
+            b.x_mm
+                .iter()
+                .zip(ys)
+                .filter_map(|(&x, y)| y.map(|y| (x, y)))
+                .collect()
+        };
+        for (label, ys, color) in [
+            (
+                "95 % band of builds (loading)",
+                b.loading_hi_n.clone(),
+                "#ef9a9a",
+            ),
+            ("", b.loading_lo_n.clone(), "#ef9a9a"),
+            (
+                "95 % band of builds (unloading)",
+                b.unloading_hi_n.iter().map(|&v| Some(v)).collect(),
+                "#90caf9",
+            ),
+            (
+                "",
+                b.unloading_lo_n.iter().map(|&v| Some(v)).collect(),
+                "#90caf9",
+            ),
+        ] {
+            force.series.push(Series {
+                label: label.into(),
+                points: line(ys),
+                color,
+                dashed: false,
+                dots: false,
+            });
+        }
+    }
     if let crate::model::ForceLaw::Table(t) = law {
         let xmax = design.xmax_mm();
         force.series.push(Series {

@@ -238,8 +238,35 @@ pub fn report_html(
     h.push_str(&figure(
         force_svg,
         "Designed force, predicted loading and unloading force (friction hysteresis) against \
-         deflection; stiffness against force.",
+         deflection, with the 95 % band of builds within the tolerances; stiffness against force.",
     ));
+    if let Some(b) = &summary.force_band {
+        let t = &summary.spec.tolerances;
+        let _ = writeln!(
+            h,
+            "<h3>What a build may deliver</h3>\n<p>{} builds drawn within the tolerances (springs \
+             &plusmn;{} %, preload &plusmn;{} mm, roller &plusmn;{} mm, profile &plusmn;{} mm, friction \
+             {} to {}): at Xmax the loading force lies between {} and {} N in 95 % of them. Each \
+             tolerance alone moves it by:</p>\n<table><tr><th>tolerance</th><th>&plusmn; loading force at Xmax</th></tr>",
+            b.samples,
+            t.spring_rate_percent,
+            t.preload_mm,
+            t.roller_radius_mm,
+            t.profile_mm,
+            t.friction_min,
+            t.friction_max,
+            b.loading_lo_n.last().copied().flatten().map_or("-".into(), |v| format!("{v:.2}")),
+            b.loading_hi_n.last().copied().flatten().map_or("-".into(), |v| format!("{v:.2}")),
+        );
+        for s in &b.sensitivity {
+            let _ = writeln!(
+                h,
+                "<tr><td>{}</td><td class=\"num\">{:.2} N</td></tr>",
+                s.tolerance, s.loading_half_range_n
+            );
+        }
+        h.push_str("</table>\n");
+    }
     h.push_str("<h2 id=\"profile\">Cam profile</h2>\n");
     h.push_str(&figure(
         profile_svg,
