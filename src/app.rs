@@ -525,6 +525,7 @@ pub fn run_sweep(
     spec_path: Option<&Path>,
     axes: &[crate::sweep::Axis],
     out_dir: Option<&Path>,
+    advise: bool,
 ) -> Result<SweepRun> {
     use crate::render::sweep::{sweep_csv, sweep_svg};
     use crate::sweep::sweep;
@@ -542,7 +543,7 @@ pub fn run_sweep(
         16,
         "sweep {bar:40} {pos}/{len} designs ({eta})",
     );
-    let points = sweep(&spec, axes, &|| {
+    let points = sweep(&spec, axes, advise, &|| {
         if let Some(b) = &bar {
             b.inc(1);
         }
@@ -556,7 +557,7 @@ pub fn run_sweep(
     let csv = dir.join("sweep.csv");
     let svg = dir.join("sweep.svg");
     write_atomic(&csv, &sweep_csv(axes, &points))?;
-    write_atomic(&svg, sweep_svg(axes, &points).as_bytes())?;
+    write_atomic(&svg, sweep_svg(axes, &points, &spec.checks).as_bytes())?;
     Ok(SweepRun {
         points,
         written: vec![csv, svg],

@@ -102,6 +102,12 @@ pub fn law_of(spec: &Spec) -> Result<SolvedLaw, LawError> {
 /// assert!(d.pitch_curve.lift_mm() > 0.0);
 /// ```
 pub fn design(spec: &Spec) -> Result<Design, DesignError> {
+    design_with(spec, true)
+}
+
+/// Runs the whole design; with `advise` false a failing check gets no advice (no
+/// re-synthesis), which is what a sweep over many designs wants.
+pub fn design_with(spec: &Spec, advise: bool) -> Result<Design, DesignError> {
     spec.validate()?;
     let law = law_of(spec)?;
     let options = synthesis_options(spec);
@@ -127,6 +133,7 @@ pub fn design(spec: &Spec) -> Result<Design, DesignError> {
         plate_thickness_mm: spec.part.thickness_mm,
         roller_width_mm: spec.part.roller_width_mm,
         contact,
+        advise,
         tool_radius_mm: spec.machining.tool_diameter_mm / 2.0,
         pitch: &pitch_curve,
         surface: &cam_surface,

@@ -12,7 +12,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::cam::checks::Status;
-use crate::model::{FrictionSource, Spec};
+use crate::model::{ChecksSpec, FrictionSource, Material, Spec, MATERIALS};
 
 /// The most designs one sweep runs.
 pub const MAX_POINTS: usize = 10_000;
@@ -29,6 +29,12 @@ pub enum SweepKey {
     RollerRadius,
     /// `follower.friction` (coefficient).
     Friction,
+    /// `part.thickness` (mm); a roller as wide as the plate follows it.
+    Thickness,
+    /// `part.roller_width` (mm).
+    RollerWidth,
+    /// `part.cam_material`: preset names, by their index in [`MATERIALS`].
+    CamMaterial,
 }
 
 impl SweepKey {
@@ -39,6 +45,9 @@ impl SweepKey {
             SweepKey::Preload => "preload_mm",
             SweepKey::RollerRadius => "roller_radius_mm",
             SweepKey::Friction => "friction",
+            SweepKey::Thickness => "thickness_mm",
+            SweepKey::RollerWidth => "roller_width_mm",
+            SweepKey::CamMaterial => "cam_material",
         }
     }
 
@@ -49,6 +58,9 @@ impl SweepKey {
             SweepKey::Preload => "preload Yp (mm)",
             SweepKey::RollerRadius => "roller radius r (mm)",
             SweepKey::Friction => "friction coefficient",
+            SweepKey::Thickness => "plate thickness (mm)",
+            SweepKey::RollerWidth => "roller width (mm)",
+            SweepKey::CamMaterial => "cam material (preset number)",
         }
     }
 
@@ -59,6 +71,28 @@ impl SweepKey {
             SweepKey::Preload => f.preload_mm = v,
             SweepKey::RollerRadius => f.roller_radius_mm = v,
             SweepKey::Friction => f.friction = FrictionSource::Coefficient { coefficient: v },
+            SweepKey::Thickness => spec.part = spec.part.clone().with_thickness(v),
+            SweepKey::RollerWidth => spec.part.roller_width_mm = v,
+            SweepKey::CamMaterial => {
+                let row = MATERIALS.get(v as usize).unwrap_or(&MATERIALS[0]);
+                if let Some(m) = Material::preset(row.0) {
+                    spec.part.cam_material = m;
+                }
+                // The contact limit follows the weaker of the materials, as in a spec file.
+                spec.checks.max_contact_stress_mpa =
+                    ChecksSpec::for_materials(&spec.part.cam_material, &spec.part.roller_material)
+                        .max_contact_stress_mpa;
+            }
+        }
+    }
+
+    /// How a value of this axis is written: a preset's name for the material, else the number.
+    pub fn value_text(self, v: f64) -> String {
+        match self {
+            SweepKey::CamMaterial => MATERIALS
+                .get(v as usize)
+                .map_or_else(|| v.to_string(), |m| m.0.to_string()),
+            _ => v.to_string(),
         }
     }
 }
@@ -82,12 +116,36 @@ pub fn parse_axis(text: &str) -> Result<Axis, String> {
         "preload" => SweepKey::Preload,
         "roller_radius" => SweepKey::RollerRadius,
         "friction" => SweepKey::Friction,
+        "thickness" => SweepKey::Thickness,
+        "roller_width" => SweepKey::RollerWidth,
+        "cam_material" => SweepKey::CamMaterial,
         other => {
             return Err(format!(
-                "--vary {text}: unknown key \"{other}\" (keys: spring_rate, preload, roller_radius, friction)"
+                "--vary {text}: unknown key \"{other}\" (keys: spring_rate, preload, roller_radius, friction, thickness, roller_width, cam_material)"
             ))
         }
     };
+    if key == SweepKey::CamMaterial {
+        // Names of presets, not numbers.
+        let values = spec
+            .split(',')
+            .map(|name| {
+                MATERIALS
+                    .iter()
+                    .position(|m| m.0 == name.trim())
+                    .map(|i| i as f64)
+                    .ok_or_else(|| {
+                        let names: Vec<&str> = MATERIALS.iter().map(|m| m.0).collect();
+                        format!(
+                            "--vary {text}: unknown material \"{}\" (presets: {})",
+                            name.trim(),
+                            names.join(", ")
+                        )
+                    })
+            })
+            .collect::<Result<Vec<f64>, String>>()?;
+        return Ok(Axis { key, values });
+    }
     let number = |s: &str| {
         s.trim()
             .parse::<f64>()
@@ -154,6 +212,8 @@ pub struct PointResult {
     pub max_contact_stress_mpa: Option<f64>,
     /// Names of the failing checks.
     pub failed_checks: Vec<&'static str>,
+    /// Names of the checks that warn.
+    pub warned_checks: Vec<&'static str>,
 }
 
 /// One grid point: its axis values and the design's result or why there is none.
@@ -167,7 +227,12 @@ pub struct SweepPoint {
 
 /// Runs the design at every point of the grid (all combinations of the axes), in parallel.
 /// `progress` is called from the workers after each point.
-pub fn sweep(spec: &Spec, axes: &[Axis], progress: &(dyn Fn() + Sync)) -> Vec<SweepPoint> {
+pub fn sweep(
+    spec: &Spec,
+    axes: &[Axis],
+    advise: bool,
+    progress: &(dyn Fn() + Sync),
+) -> Vec<SweepPoint> {
     let mut grid: Vec<Vec<f64>> = vec![Vec::new()];
     for axis in axes {
         grid = grid
@@ -187,7 +252,7 @@ pub fn sweep(spec: &Spec, axes: &[Axis], progress: &(dyn Fn() + Sync)) -> Vec<Sw
             for (axis, &v) in axes.iter().zip(&values) {
                 axis.key.apply(&mut s, v);
             }
-            let result = crate::design::design(&s)
+            let result = crate::design::design_with(&s, advise)
                 .map(|d| PointResult {
                     status: d.status(),
                     lift_mm: d.pitch_curve.lift_mm(),
@@ -197,6 +262,12 @@ pub fn sweep(spec: &Spec, axes: &[Axis], progress: &(dyn Fn() + Sync)) -> Vec<Sw
                         .checks
                         .iter()
                         .filter(|c| c.status == Status::Fail)
+                        .map(|c| c.name)
+                        .collect(),
+                    warned_checks: d
+                        .checks
+                        .iter()
+                        .filter(|c| c.status == Status::Warn)
                         .map(|c| c.name)
                         .collect(),
                 })

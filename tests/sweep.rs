@@ -60,7 +60,7 @@ fn every_grid_point_is_the_design_of_that_spec() {
         parse_axis("spring_rate=3..12:4").unwrap(),
         parse_axis("preload=0.5,1.5,3").unwrap(),
     ];
-    let points = sweep(&spec, &axes, &|| {});
+    let points = sweep(&spec, &axes, false, &|| {});
     assert_eq!(points.len(), 12);
     for p in &points {
         let mut s = spec.clone();
@@ -74,7 +74,12 @@ fn every_grid_point_is_the_design_of_that_spec() {
                     r.max_pressure_angle_deg,
                     d.pitch_curve.max_pressure_angle().0
                 );
-                assert_eq!(r.status == Status::Fail, d.status() == Status::Fail);
+                assert_eq!(r.status, d.status());
+                // The checks that fail and warn are named per point.
+                for c in &d.checks {
+                    assert_eq!(r.failed_checks.contains(&c.name), c.status == Status::Fail);
+                    assert_eq!(r.warned_checks.contains(&c.name), c.status == Status::Warn);
+                }
             }
             (Err(e), Err(de)) => assert_eq!(e, &de.to_string()),
             (r, d) => panic!("sweep {r:?} but design {:?}", d.map(|_| ())),
@@ -90,4 +95,45 @@ fn every_grid_point_is_the_design_of_that_spec() {
         csv.starts_with("spring_rate_n_per_mm,preload_mm,status,lift_mm,max_pressure_angle_deg,")
     );
     assert_eq!(csv.lines().count(), 13);
+}
+
+#[test]
+fn plate_roller_and_material_axes_are_the_designs_of_those_specs() {
+    let spec = Spec::from_toml(DEFAULT_SPEC_TOML).unwrap();
+    let axes = [
+        parse_axis("thickness=4..12:3").unwrap(),
+        parse_axis("cam_material=aluminium-6061-t6,steel-1045").unwrap(),
+    ];
+    let points = sweep(&spec, &axes, false, &|| {});
+    assert_eq!(points.len(), 6);
+    for p in &points {
+        let mut s = spec.clone();
+        s.part = s.part.clone().with_thickness(p.values[0]);
+        let name = ["aluminium-6061-t6", "steel-1045"][p.values[1] as usize / 2];
+        s.part.cam_material = camspring::model::Material::preset(name).unwrap();
+        s.checks = camspring::model::ChecksSpec::for_materials(
+            &s.part.cam_material,
+            &s.part.roller_material,
+        );
+        let d = design(&s).unwrap();
+        let r = p.result.as_ref().unwrap();
+        assert_eq!(r.max_contact_stress_mpa, d.max_contact_stress_mpa());
+        assert_eq!(r.status, d.status());
+    }
+    let csv = String::from_utf8(sweep_csv(&axes, &points)).unwrap();
+    assert!(csv.contains(",steel-1045,"), "{csv}");
+    assert!(csv.lines().next().unwrap().contains("warned_checks"));
+    // Thicker plates lower the contact stress.
+    let at = |t: f64| {
+        points
+            .iter()
+            .find(|p| p.values == vec![t, 0.0])
+            .unwrap()
+            .result
+            .as_ref()
+            .unwrap()
+            .max_contact_stress_mpa
+            .unwrap()
+    };
+    assert!(at(12.0) < at(4.0));
 }

@@ -115,6 +115,8 @@ pub struct CheckInput<'a> {
     pub roller_width_mm: f64,
     /// The contact model (E* and contact length), for the contact-stress advice.
     pub contact: ContactModel,
+    /// Whether to search for advice (re-synthesising the cam); sweeps leave it out.
+    pub advise: bool,
     /// Cutter radius.
     pub tool_radius_mm: f64,
     /// The pitch curve.
@@ -235,7 +237,7 @@ fn roller_life(input: &CheckInput<'_>) -> Option<Check> {
     } else {
         Status::Pass
     };
-    let advice = (status != Status::Pass).then(|| {
+    let advice = (input.advise && status != Status::Pass).then(|| {
         let needed = round_up(
             duty.mean_load_n
                 * (LIFE_WARN_FACTOR * strokes * duty.revolutions_per_stroke / 1e6).powf(0.3),
@@ -539,7 +541,7 @@ fn pressure_angle(input: &CheckInput<'_>) -> Check {
     };
     let (advice, suggestions) =
         // The advice aims at a pass, below the warning band.
-        advice_fields((status == Status::Fail).then(|| angle_advice(input, limit - PRESSURE_ANGLE_WARN_DEG, None)));
+        advice_fields((input.advise && status == Status::Fail).then(|| angle_advice(input, limit - PRESSURE_ANGLE_WARN_DEG, None)));
     Check {
         name: "pressure_angle",
         status,
@@ -589,7 +591,7 @@ fn self_locking(input: &CheckInput<'_>) -> Check {
          unloading return margin theta - phi = {unload_margin:.2} deg at x = {at_min:.3} mm \
          (phi = {phi:.2} deg; below 0 the spring cannot push the rod back)"
     );
-    let advice = (status != Status::Pass).then(|| {
+    let advice = (input.advise && status != Status::Pass).then(|| {
         if loading_worse {
             // Less jamming, while the spring still returns the rod with the margin.
             angle_advice(input, 90.0 - phi - limit - LOCKING_WARN_DEG, Some(phi + limit))
@@ -661,7 +663,7 @@ fn undercut(input: &CheckInput<'_>) -> Check {
             "smallest pitch-curve radius on the material side {rho:.4} mm at x = {at:.3} mm (roller radius {r} mm)"
         ),
     };
-    let advice = (status != Status::Pass).then(|| {
+    let advice = (input.advise && status != Status::Pass).then(|| {
         let f = input.follower;
         let wanted = UNDERCUT_WARN_RATIO * r;
         let by_preload = first_crossing(f.preload_mm, preload_candidates(f.preload_mm, input.xmax_mm), |yp| {
@@ -713,7 +715,7 @@ fn cutter_fit(input: &CheckInput<'_>) -> Check {
             2.0 * rad
         ),
     };
-    let advice = (status == Status::Fail).then(|| {
+    let advice = (input.advise && status == Status::Fail).then(|| {
         let d = round_down(2.0 * concave.map_or(0.0, |c| c.0));
         Advice {
             text: format!(
@@ -771,7 +773,7 @@ fn contact_stress(input: &CheckInput<'_>) -> Check {
     } else {
         Status::Pass
     };
-    let advice = (status != Status::Pass).then(|| contact_advice(input, p));
+    let advice = (input.advise && status != Status::Pass).then(|| contact_advice(input, p));
     let (advice, suggestions) = advice_fields(advice);
     Check {
         name: "contact_stress",

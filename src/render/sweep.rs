@@ -2,6 +2,7 @@
 
 use super::plot::{self, Panel, Series};
 use crate::cam::checks::Status;
+use crate::model::ChecksSpec;
 use crate::sweep::{Axis, PointResult, SweepPoint};
 
 /// `sweep.csv`: the axis values, then status, lift_mm, max_pressure_angle_deg,
@@ -13,27 +14,28 @@ pub fn sweep_csv(axes: &[Axis], points: &[SweepPoint]) -> Vec<u8> {
         let _ = write!(out, "{},", a.key.column());
     }
     out.push_str(
-        "status,lift_mm,max_pressure_angle_deg,max_contact_stress_mpa,failed_checks,error\n",
+        "status,lift_mm,max_pressure_angle_deg,max_contact_stress_mpa,failed_checks,warned_checks,error\n",
     );
     for p in points {
-        for v in &p.values {
-            let _ = write!(out, "{v},");
+        for (a, v) in axes.iter().zip(&p.values) {
+            let _ = write!(out, "{},", a.key.value_text(*v));
         }
         match &p.result {
             Ok(r) => {
                 let _ = writeln!(
                     out,
-                    "{},{:.6},{:.4},{},{},",
+                    "{},{:.6},{:.4},{},{},{},",
                     r.status.as_str(),
                     r.lift_mm,
                     r.max_pressure_angle_deg,
                     r.max_contact_stress_mpa
                         .map_or(String::new(), |v| format!("{v:.3}")),
-                    r.failed_checks.join(" ")
+                    r.failed_checks.join(" "),
+                    r.warned_checks.join(" ")
                 );
             }
             Err(e) => {
-                let _ = writeln!(out, "error,,,,,\"{}\"", e.replace('"', "'"));
+                let _ = writeln!(out, "error,,,,,,\"{}\"", e.replace('"', "'"));
             }
         }
     }
@@ -43,7 +45,7 @@ pub fn sweep_csv(axes: &[Axis], points: &[SweepPoint]) -> Vec<u8> {
 /// `sweep.svg`: largest pressure angle, lift and contact stress against the first axis, one
 /// line per value of the second axis (points of failing designs are left out of the lines
 /// and drawn as dots).
-pub fn sweep_svg(axes: &[Axis], points: &[SweepPoint]) -> String {
+pub fn sweep_svg(axes: &[Axis], points: &[SweepPoint], limits: &ChecksSpec) -> String {
     let colours = [
         "#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#7f7f7f",
         "#bcbd22", "#17becf",
@@ -52,7 +54,16 @@ pub fn sweep_svg(axes: &[Axis], points: &[SweepPoint]) -> String {
         Some(a) => a.values.iter().map(|&v| Some(v)).collect(),
         None => vec![None],
     };
-    let panel = |title: &str, label: &str, get: &dyn Fn(&PointResult) -> Option<f64>| {
+    let first = &axes[0].values;
+    let (x_lo, x_hi) = first
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    let panel = |title: &str,
+                 label: &str,
+                 get: &dyn Fn(&PointResult) -> Option<f64>,
+                 limit: Option<(f64, &str)>| {
         let mut series = Vec::new();
         for (i, g) in groups.iter().enumerate() {
             let in_group = |p: &&SweepPoint| g.is_none_or(|v| p.values.get(1) == Some(&v));
@@ -94,6 +105,15 @@ pub fn sweep_svg(axes: &[Axis], points: &[SweepPoint]) -> String {
                 });
             }
         }
+        if let Some((y, name)) = limit {
+            series.push(Series {
+                label: name.to_string(),
+                points: vec![(x_lo, y), (x_hi, y)],
+                color: "#c62828",
+                dashed: true,
+                dots: false,
+            });
+        }
         Panel {
             title: format!("{title} (dots: a check fails)"),
             x_label: axes[0].key.label().into(),
@@ -103,13 +123,27 @@ pub fn sweep_svg(axes: &[Axis], points: &[SweepPoint]) -> String {
         }
     };
     let panels = [
-        panel("Largest pressure angle", "pressure angle (deg)", &|r| {
-            Some(r.max_pressure_angle_deg)
-        }),
-        panel("Follower lift at Xmax", "lift (mm)", &|r| Some(r.lift_mm)),
-        panel("Peak contact stress", "contact stress (MPa)", &|r| {
-            r.max_contact_stress_mpa
-        }),
+        panel(
+            "Largest pressure angle",
+            "pressure angle (deg)",
+            &|r| Some(r.max_pressure_angle_deg),
+            Some((limits.max_pressure_angle_deg, "limit")),
+        ),
+        panel(
+            "Follower lift at Xmax",
+            "lift (mm)",
+            &|r| Some(r.lift_mm),
+            None,
+        ),
+        panel(
+            "Peak contact stress",
+            "contact stress (MPa)",
+            &|r| r.max_contact_stress_mpa,
+            Some((
+                limits.max_contact_stress_mpa,
+                "limit (the spec's; per material on a material axis)",
+            )),
+        ),
     ];
     plot::document(&panels, 520.0, 440.0).to_string()
 }

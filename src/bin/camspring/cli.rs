@@ -79,14 +79,20 @@ pub enum Command {
     /// Examples:
     ///   camspring sweep specs/paper.toml --vary spring_rate=2..20 --vary preload=0..10
     ///   camspring sweep specs/paper.toml --vary roller_radius=1..5:9 --vary friction=0,0.01,0.05
+    ///   camspring sweep specs/paper.toml --vary thickness=4..12:5 --vary cam_material=aluminium-6061-t6,steel-1045
     #[command(verbatim_doc_comment)]
     Sweep {
         /// Spec file (TOML); the built-in default spec when omitted.
         spec: Option<PathBuf>,
         /// An axis: KEY=A..B (10 values), KEY=A..B:N or KEY=V1,V2,...; keys spring_rate (N/mm),
-        /// preload (mm), roller_radius (mm), friction. Repeat for up to 3 axes.
+        /// preload (mm), roller_radius (mm), friction, thickness (mm), roller_width (mm) and
+        /// cam_material (preset names). Repeat for up to 3 axes.
         #[arg(long, required = true, value_parser = parse_axis)]
         vary: Vec<camspring::sweep::Axis>,
+        /// Also search each failing check's advice at every point (slower: the searches
+        /// re-synthesise the cam).
+        #[arg(long)]
+        advice: bool,
         /// Output folder (default out/<spec name>/sweep).
         #[arg(short, long)]
         out: Option<PathBuf>,

@@ -326,9 +326,10 @@ fn main() -> ExitCode {
             spec,
             vary,
             out,
+            advice,
             json,
         } => emit(
-            run_sweep(spec.as_deref(), &vary, out.as_deref()).and_then(|run| {
+            run_sweep(spec.as_deref(), &vary, out.as_deref(), advice).and_then(|run| {
                 let count = |s: Status| {
                     run.points
                         .iter()
