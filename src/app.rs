@@ -563,3 +563,100 @@ pub fn run_sweep(
         written: vec![csv, svg],
     })
 }
+
+/// What `camspring springs` found and wrote.
+#[derive(Debug, Clone)]
+pub struct SpringsRun {
+    /// The catalogue's springs, ranked.
+    pub choices: Vec<crate::sweep::SpringChoice>,
+    /// The spec written with the applied spring, if one was applied.
+    pub written: Option<PathBuf>,
+}
+
+/// `text` (a spec) with `key = value` set in its `[follower]` table: the key's line replaced,
+/// or added right after the table's header.
+fn set_follower_key(text: &str, key: &str, value: &str) -> String {
+    let mut out: Vec<String> = Vec::new();
+    let mut in_follower = false;
+    let mut done = false;
+    for line in text.lines() {
+        let trimmed = line.trim_start();
+        if trimmed.starts_with('[') {
+            if in_follower && !done {
+                out.push(format!("{key} = {value}"));
+                done = true;
+            }
+            in_follower = trimmed.starts_with("[follower]");
+        }
+        let is_key = trimmed
+            .strip_prefix(key)
+            .is_some_and(|rest| rest.trim_start().starts_with('='));
+        if in_follower && is_key && !done {
+            out.push(format!("{key} = {value}"));
+            done = true;
+            continue;
+        }
+        out.push(line.to_string());
+    }
+    if !done {
+        out.push(format!("{key} = {value}"));
+    }
+    out.join("\n") + "\n"
+}
+
+/// Runs `camspring springs`: ranks the spec's catalogue springs; with `apply`, writes the spec
+/// with that spring's rate and the preload it needs (default `<spec>-<PART>.toml`).
+pub fn run_springs(
+    spec_path: &Path,
+    apply: Option<&str>,
+    out: Option<&Path>,
+) -> Result<SpringsRun> {
+    let spec = load_spec(Some(spec_path))?;
+    if spec.spring_catalogue.is_none() {
+        return Err(Error::Argument(format!(
+            "{}: no follower.spring_catalogue; name a CSV file of springs (specs/springs.csv is an example)",
+            spec_path.display()
+        )));
+    }
+    let choices = crate::sweep::choose_springs(&spec);
+    let written = match apply {
+        None => None,
+        Some(part) => {
+            let choice = choices
+                .iter()
+                .find(|c| c.spring.part == part)
+                .ok_or_else(|| {
+                    let parts: Vec<&str> = choices.iter().map(|c| c.spring.part.as_str()).collect();
+                    Error::Argument(format!(
+                        "--apply {part}: not in the catalogue (parts: {})",
+                        parts.join(", ")
+                    ))
+                })?;
+            let preload = choice.preload_mm.ok_or_else(|| {
+                Error::Argument(format!(
+                    "--apply {part}: this spring cannot realise the design ({})",
+                    choice.why.as_deref().unwrap_or("no preload works")
+                ))
+            })?;
+            let text = std::fs::read_to_string(spec_path).map_err(|source| Error::Read {
+                path: spec_path.to_path_buf(),
+                source,
+            })?;
+            let text = set_follower_key(
+                &text,
+                "spring_rate",
+                &format!("\"{} N/mm\"  # {part}", choice.spring.rate_n_per_mm),
+            );
+            let text = set_follower_key(&text, "preload", &format!("\"{preload} mm\""));
+            let path = out.map(Path::to_path_buf).unwrap_or_else(|| {
+                let stem = spec_path
+                    .file_stem()
+                    .map_or("spec".into(), |s| s.to_string_lossy().into_owned());
+                spec_path.with_file_name(format!("{stem}-{part}.toml"))
+            });
+            write_atomic(&path, text.as_bytes())?;
+            Some(path)
+        }
+    };
+    Ok(SpringsRun { choices, written })
+}

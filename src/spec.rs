@@ -190,6 +190,7 @@ struct RawFollower {
     roller_dynamic_load: Q,
     duty_strokes: Q,
     stroke_rate: Q,
+    spring_catalogue: Option<Spanned<String>>,
 }
 
 /// A material: a preset name, or a table { youngs_modulus, poisson_ratio, yield_strength }.
@@ -678,6 +679,14 @@ fn read(raw: &RawSpec, r: &mut Reader<'_>) -> Result<Spec, SpecError> {
         samples: r.count("tolerances.samples", &t.samples, usize::MAX, d.samples),
         seed: r.count("tolerances.seed", &t.seed, u64::MAX, d.seed),
     };
+    let spring_catalogue = match raw
+        .follower
+        .as_ref()
+        .and_then(|f| f.spring_catalogue.as_ref())
+    {
+        Some(c) => Some(read_catalogue(r, c)?),
+        None => None,
+    };
     Ok(Spec {
         name,
         law,
@@ -687,6 +696,7 @@ fn read(raw: &RawSpec, r: &mut Reader<'_>) -> Result<Spec, SpecError> {
         checks,
         output,
         tolerances,
+        spring_catalogue,
     })
 }
 
@@ -919,6 +929,119 @@ fn read_table(r: &mut Reader<'_>, table: &Spanned<String>) -> Result<Vec<(f64, f
         points.push((number(xc, xf)?, number(fc, ff)?));
     }
     Ok(points)
+}
+
+/// The unit a column header names after its prefix: `rate_n_per_mm` -> "N/mm", `x_in` -> "in";
+/// matched against the dimension's units without regard to case.
+fn header_unit(suffix: &str, dim: Dimension) -> Option<f64> {
+    let spelled = suffix.replace("_per_", "/");
+    dim.units()
+        .iter()
+        .find(|(u, _)| u.eq_ignore_ascii_case(&spelled))
+        .map(|(_, f)| *f)
+}
+
+/// Reads the spring catalogue named in the spec: a CSV file (relative to the spec's folder)
+/// with columns `part`, `rate_<unit>`, `free_length_<unit>`, `solid_length_<unit>`,
+/// `max_deflection_<unit>`, `outer_diameter_<unit>`; `#` comments allowed.
+fn read_catalogue(
+    r: &mut Reader<'_>,
+    name: &Spanned<String>,
+) -> Result<crate::model::SpringCatalogue, SpecError> {
+    use std::io::Read;
+    let file = name.get_ref();
+    let path = r.base.join(file);
+    let spec_line = r.line(name.span().start);
+    let fail = |found: String, expected: &str| SpecError::Invalid {
+        key: "follower.spring_catalogue".into(),
+        line: Some(spec_line),
+        found,
+        expected: expected.to_string(),
+    };
+    let mut text = String::new();
+    std::fs::File::open(&path)
+        .and_then(|f| f.take(MAX_TABLE_BYTES + 1).read_to_string(&mut text))
+        .map_err(|e| {
+            fail(
+                format!("{}: {e}", path.display()),
+                "a readable CSV file, relative to the spec's folder",
+            )
+        })?;
+    if text.len() as u64 > MAX_TABLE_BYTES {
+        return Err(fail(
+            format!("{file}: too large"),
+            "a catalogue of a few thousand springs at most",
+        ));
+    }
+    let mut rdr = csv::ReaderBuilder::new()
+        .comment(Some(b'#'))
+        .trim(csv::Trim::All)
+        .from_reader(text.as_bytes());
+    let header = rdr
+        .headers()
+        .map_err(|e| fail(format!("{file}: {e}"), "a header"))?
+        .clone();
+    let expected = "columns part, rate_<unit> (N/mm, lbf/in: rate_n_per_mm), free_length_<unit>, solid_length_<unit>, max_deflection_<unit>, outer_diameter_<unit>";
+    let part_col = header
+        .iter()
+        .position(|h| h.eq_ignore_ascii_case("part"))
+        .ok_or_else(|| fail(format!("{file} line 1: no column \"part\""), expected))?;
+    let column = |prefix: &str, dim: Dimension| -> Result<(usize, f64), SpecError> {
+        header
+            .iter()
+            .enumerate()
+            .find_map(|(i, h)| {
+                let lower = h.to_ascii_lowercase();
+                let suffix = lower.strip_prefix(prefix)?;
+                header_unit(suffix, dim).map(|f| (i, f))
+            })
+            .ok_or_else(|| fail(format!("{file} line 1: no column {prefix}<unit>"), expected))
+    };
+    let rate = column("rate_", Dimension::Stiffness)?;
+    let free = column("free_length_", Dimension::Length)?;
+    let solid = column("solid_length_", Dimension::Length)?;
+    let travel = column("max_deflection_", Dimension::Length)?;
+    let od = column("outer_diameter_", Dimension::Length)?;
+    let mut springs = Vec::new();
+    for record in rdr.records() {
+        let record = record.map_err(|e| fail(format!("{file}: {e}"), expected))?;
+        let line = record.position().map_or(0, |p| p.line());
+        let number = |(col, factor): (usize, f64)| {
+            let cell = record.get(col).unwrap_or("");
+            cell.parse::<f64>()
+                .ok()
+                .map(|v| v * factor)
+                .filter(|v| v.is_finite() && *v > 0.0)
+                .ok_or_else(|| {
+                    fail(
+                        format!("{file} line {line}: {}", quoted(cell)),
+                        "a positive number",
+                    )
+                })
+        };
+        let spring = crate::model::CatalogueSpring {
+            part: record.get(part_col).unwrap_or("").to_string(),
+            rate_n_per_mm: number(rate)?,
+            free_length_mm: number(free)?,
+            solid_length_mm: number(solid)?,
+            max_deflection_mm: number(travel)?,
+            outer_diameter_mm: number(od)?,
+        };
+        if spring.part.is_empty() {
+            return Err(fail(
+                format!("{file} line {line}: an empty part number"),
+                "a part number in every row",
+            ));
+        }
+        springs.push(spring);
+    }
+    if springs.is_empty() {
+        return Err(fail(format!("{file}: no springs"), "at least one spring"));
+    }
+    Ok(crate::model::SpringCatalogue {
+        source: file.clone(),
+        springs,
+    })
 }
 
 fn read_follower(raw: &RawSpec, r: &mut Reader<'_>) -> Result<Follower, SpecError> {

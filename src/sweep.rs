@@ -277,3 +277,96 @@ pub fn sweep(
         })
         .collect()
 }
+
+/// How one catalogue spring realises the design.
+#[derive(Debug, Clone, Serialize)]
+pub struct SpringChoice {
+    /// The catalogue's spring.
+    pub spring: crate::model::CatalogueSpring,
+    /// The preload it needs (mm): the smallest that passes the checks, or that only warns;
+    /// null when none works within its travel.
+    pub preload_mm: Option<f64>,
+    /// The re-synthesised design's status at that preload.
+    pub status: Option<Status>,
+    /// The spring's deflection at the full stroke (mm).
+    pub deflection_at_full_stroke_mm: Option<f64>,
+    /// Travel left before the maker's limit (mm): the ranking.
+    pub margin_mm: Option<f64>,
+    /// Why it cannot, when it cannot.
+    pub why: Option<String>,
+}
+
+/// Preloads tried per spring, from none to the spring's whole travel.
+const PRELOAD_STEPS: usize = 40;
+
+/// Ranks the spec's catalogue springs: for each, the design re-synthesised with its rate at
+/// the smallest preload (on a grid of [`PRELOAD_STEPS`] over its travel) whose checks pass, or
+/// else only warn, with the spring's deflection at the full stroke within its allowed travel
+/// and above its solid length. Springs that work come first, passing before warning, then by
+/// the travel they have left.
+pub fn choose_springs(spec: &Spec) -> Vec<SpringChoice> {
+    let Some(catalogue) = &spec.spring_catalogue else {
+        return Vec::new();
+    };
+    let mut choices: Vec<SpringChoice> = catalogue
+        .springs
+        .par_iter()
+        .map(|c| {
+            let mut best: Option<(Status, f64, f64)> = None;
+            let mut reason = "no preload within its travel gives a design whose checks pass";
+            for k in 0..PRELOAD_STEPS {
+                let preload = c.max_deflection_mm * k as f64 / PRELOAD_STEPS as f64;
+                let mut s = spec.clone();
+                s.follower.spring_rate_n_per_mm = c.rate_n_per_mm;
+                s.follower.preload_mm = preload;
+                let Ok(d) = crate::design::design_with(&s, false) else {
+                    continue;
+                };
+                let status = d.status();
+                if status == Status::Fail {
+                    continue;
+                }
+                let (_, deflection) = s.follower.springs(d.pitch_curve.lift_mm());
+                if deflection > c.max_deflection_mm
+                    || c.free_length_mm - deflection < c.solid_length_mm
+                {
+                    reason = "the stroke needs more deflection than the spring allows";
+                    break;
+                }
+                if best.is_none_or(|b| status < b.0) {
+                    best = Some((status, preload, deflection));
+                }
+                if status == Status::Pass {
+                    break;
+                }
+            }
+            match best {
+                Some((status, preload, deflection)) => SpringChoice {
+                    spring: c.clone(),
+                    preload_mm: Some(preload),
+                    status: Some(status),
+                    deflection_at_full_stroke_mm: Some(deflection),
+                    margin_mm: Some(c.max_deflection_mm - deflection),
+                    why: None,
+                },
+                None => SpringChoice {
+                    spring: c.clone(),
+                    preload_mm: None,
+                    status: None,
+                    deflection_at_full_stroke_mm: None,
+                    margin_mm: None,
+                    why: Some(reason.into()),
+                },
+            }
+        })
+        .collect();
+    choices.sort_by(|a, b| {
+        let key = |c: &SpringChoice| (c.status.is_none(), c.status.unwrap_or(Status::Fail));
+        key(a).cmp(&key(b)).then(
+            b.margin_mm
+                .unwrap_or(f64::NEG_INFINITY)
+                .total_cmp(&a.margin_mm.unwrap_or(f64::NEG_INFINITY)),
+        )
+    });
+    choices
+}

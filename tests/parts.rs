@@ -113,3 +113,64 @@ fn the_roller_life_check_advises_a_rating_that_passes() {
         .iter()
         .all(|c| c.name != "roller_life"));
 }
+
+#[test]
+fn catalogue_springs_are_ranked_and_the_applied_one_designs_as_listed() {
+    use std::process::Command;
+    let d = tempfile::tempdir().unwrap();
+    let root = env!("CARGO_MANIFEST_DIR");
+    std::fs::copy(
+        format!("{root}/specs/springs.csv"),
+        d.path().join("springs.csv"),
+    )
+    .unwrap();
+    let spec = std::fs::read_to_string(format!("{root}/specs/paper.toml"))
+        .unwrap()
+        .replace("[part]", "spring_catalogue = \"springs.csv\"\n\n[part]");
+    std::fs::write(d.path().join("s.toml"), spec).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_camspring"))
+        .args(["springs", "s.toml", "--json", "--apply", "CS-0505"])
+        .current_dir(d.path())
+        .output()
+        .unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let choices = v["choices"].as_array().unwrap();
+    assert_eq!(choices.len(), 10);
+    // Ranked: the workable ones first, passing before warning, then by travel left.
+    let key = |c: &serde_json::Value| match c["status"].as_str() {
+        Some("pass") => 0,
+        Some("warn") => 1,
+        _ => 2,
+    };
+    for w in choices.windows(2) {
+        assert!(key(&w[0]) <= key(&w[1]));
+        if key(&w[0]) == key(&w[1]) && key(&w[0]) < 2 {
+            assert!(w[0]["margin_mm"].as_f64() >= w[1]["margin_mm"].as_f64());
+        }
+    }
+    // The applied spec: the part's rate and the listed preload; designed anew it has the
+    // listed status, and its springs deflect by preload + lift, within the maker's travel.
+    let chosen = choices
+        .iter()
+        .find(|c| c["spring"]["part"] == "CS-0505")
+        .unwrap();
+    let written = d.path().join("s-CS-0505.toml");
+    let text = std::fs::read_to_string(&written).unwrap();
+    let spec = camspring::spec::parse_in(&text, d.path()).unwrap();
+    assert_eq!(spec.follower.spring_rate_n_per_mm, 5.05);
+    assert_eq!(
+        Some(spec.follower.preload_mm),
+        chosen["preload_mm"].as_f64()
+    );
+    let des = design(&spec).unwrap();
+    assert_eq!(des.status().as_str(), chosen["status"].as_str().unwrap());
+    let deflection = spec.follower.preload_mm + des.pitch_curve.lift_mm();
+    assert!((deflection - chosen["deflection_at_full_stroke_mm"].as_f64().unwrap()).abs() < 1e-9);
+    assert!(deflection <= 23.0);
+}

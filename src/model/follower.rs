@@ -267,3 +267,29 @@ mod tests {
         assert!((f.friction_coefficient() - (0.2 * 1.5 + 0.003) / 3.0).abs() < 1e-15);
     }
 }
+
+/// A spring a catalogue offers.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CatalogueSpring {
+    /// Part number.
+    pub part: String,
+    /// Rate.
+    pub rate_n_per_mm: f64,
+    /// Free length.
+    pub free_length_mm: f64,
+    /// Solid length.
+    pub solid_length_mm: f64,
+    /// Largest working deflection the maker allows.
+    pub max_deflection_mm: f64,
+    /// Outer diameter.
+    pub outer_diameter_mm: f64,
+}
+
+/// A spring catalogue named in the spec (`follower.spring_catalogue`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SpringCatalogue {
+    /// The file it came from.
+    pub source: String,
+    /// Its springs.
+    pub springs: Vec<CatalogueSpring>,
+}

@@ -30,7 +30,8 @@ pub mod part;
 use serde::Serialize;
 
 pub use follower::{
-    Follower, FrictionCorrection, FrictionSource, RollerBearing, SpringArrangement, MAX_FRICTION,
+    CatalogueSpring, Follower, FrictionCorrection, FrictionSource, RollerBearing,
+    SpringArrangement, SpringCatalogue, MAX_FRICTION,
 };
 pub use law::{Condition, ExpLaw, ForceLaw, LawSpec, LawTargets, TableLaw};
 pub use machining::{Coolant, Dialect, MachiningSpec, WorkOffset};
@@ -244,6 +245,8 @@ pub struct Spec {
     pub output: OutputSpec,
     /// Tolerances of the build, for the force band.
     pub tolerances: TolerancesSpec,
+    /// Springs to choose from (`follower.spring_catalogue`), for `camspring springs`.
+    pub spring_catalogue: Option<SpringCatalogue>,
 }
 
 /// Builds a [`Spec`] in code: the law and the followers are required, every other section
@@ -405,6 +408,7 @@ impl Spec {
                 checks: ChecksSpec::default(),
                 output: OutputSpec::default(),
                 tolerances: TolerancesSpec::default(),
+                spring_catalogue: None,
             },
             checks_given: false,
         }

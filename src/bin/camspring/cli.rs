@@ -100,6 +100,28 @@ pub enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Rank the springs of the spec's catalogue (follower.spring_catalogue) for this design.
+    ///
+    /// Each spring's rate re-synthesises the cam at the smallest preload that passes; springs
+    /// that realise the design within their travel come first, ranked by the travel left.
+    ///
+    /// Examples:
+    ///   camspring springs my.toml
+    ///   camspring springs my.toml --apply CS-0820          # writes my-CS-0820.toml
+    #[command(verbatim_doc_comment)]
+    Springs {
+        /// Spec file (TOML) naming a spring catalogue.
+        spec: PathBuf,
+        /// Write the spec with this part's rate and the preload it needs.
+        #[arg(long, value_name = "PART")]
+        apply: Option<String>,
+        /// Where --apply writes (default: SPEC-PART.toml beside the spec).
+        #[arg(short, long)]
+        out: Option<PathBuf>,
+        /// Print the ranking as JSON on stdout.
+        #[arg(long)]
+        json: bool,
+    },
     /// Simulate a calibration run of the spec's designed spring, with known truth.
     ///
     /// The log is CSV (t_s,force_n,position_mm); the truth JSON holds the parameters and

@@ -351,6 +351,51 @@ fn main() -> ExitCode {
             }),
             json,
         ),
+        Command::Springs {
+            spec,
+            apply,
+            out,
+            json,
+        } => emit(
+            camspring::app::run_springs(&spec, apply.as_deref(), out.as_deref()).and_then(|run| {
+                let mut text = String::from(
+                    "part      rate N/mm  preload mm  status  deflection mm  margin mm\n",
+                );
+                for c in &run.choices {
+                    match (
+                        c.preload_mm,
+                        c.status,
+                        c.deflection_at_full_stroke_mm,
+                        c.margin_mm,
+                    ) {
+                        (Some(p), Some(st), Some(d), Some(m)) => text.push_str(&format!(
+                            "{:<9} {:>9.3} {:>11.3}  {:<6} {:>13.3} {:>10.3}\n",
+                            c.spring.part,
+                            c.spring.rate_n_per_mm,
+                            p,
+                            st.as_str().to_uppercase(),
+                            d,
+                            m
+                        )),
+                        _ => text.push_str(&format!(
+                            "{:<9} {:>9.3}  cannot: {}\n",
+                            c.spring.part,
+                            c.spring.rate_n_per_mm,
+                            c.why.as_deref().unwrap_or("")
+                        )),
+                    }
+                }
+                if let Some(p) = &run.written {
+                    text.push_str(&format!("wrote {}\n", p.display()));
+                }
+                Ok(Report::of_checks(
+                    text,
+                    to_json(&json!({ "choices": run.choices, "written": run.written }))?,
+                    EXIT_OK,
+                ))
+            }),
+            json,
+        ),
         Command::Simulate {
             spec,
             out,
