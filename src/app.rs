@@ -469,13 +469,27 @@ pub fn run_validate(
     map: &crate::estimate::log::ColumnMap,
     sampling_tolerance: f64,
     opts: &EstimateOptions,
-    tolerance: f64,
+    tolerance: Option<f64>,
     svg: Option<&Path>,
 ) -> Result<(Verdict, PathBuf)> {
     use crate::render::calibration::{curve_validation_svg, validation_svg};
     use crate::verdict::validate::{validate, validate_curve};
     let spec = load_spec(spec_path)?;
     let designed = designed_law(&spec)?;
+    // By default the force is judged against the band of builds the design's tolerances
+    // allow; a flat --tolerance judges it against the law instead.
+    let band = match tolerance {
+        Some(_) => None,
+        None => {
+            let d = crate::design::design_with(&spec, false)?;
+            Some(crate::cam::tolerance::force_band(
+                &d.pitch_curve,
+                &spec.follower,
+                &spec.tolerances,
+            ))
+        }
+    };
+    let tolerance = tolerance.unwrap_or(crate::verdict::validate::BAND_MODE_TOLERANCE);
     let log = read_log_file(log_path, map, sampling_tolerance, true)?;
     let log_name = log_path
         .file_name()
@@ -487,13 +501,20 @@ pub fn run_validate(
                 .identification
                 .as_ref()
                 .ok_or_else(|| Error::Argument("validate needs the identification init".into()))?;
-            let v = validate(law, id, &est.run, &log.position_mm, tolerance);
+            let v = validate(
+                law,
+                id,
+                &est.run,
+                &log.position_mm,
+                tolerance,
+                band.as_ref(),
+            );
             let svg_text = validation_svg(&v, &est.run);
             let html = crate::render::html::validation_html(&v, &svg_text, &log_name);
             (Verdict::Law(v), svg_text, html)
         }
         ForceLaw::Table(_) => {
-            let v = validate_curve(&designed, &log, &opts.noise, tolerance);
+            let v = validate_curve(&designed, &log, &opts.noise, tolerance, band.as_ref());
             let svg_text = curve_validation_svg(&v);
             let html = crate::render::html::curve_validation_html(&v, &svg_text, &log_name);
             (Verdict::Curve(v), svg_text, html)

@@ -198,6 +198,7 @@ fn validate_built_against(
         &est.run,
         &log.position_mm,
         0.03,
+        None,
     )
 }
 

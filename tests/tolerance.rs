@@ -91,3 +91,63 @@ fn the_band_is_reproducible_and_the_spring_rate_dominates_the_paper_spring() {
     assert!((c.loading_lo_n.last().unwrap().unwrap() - end).abs() < 1e-9);
     assert!((c.loading_hi_n.last().unwrap().unwrap() - end).abs() < 1e-9);
 }
+
+#[test]
+fn validate_judges_builds_against_the_band_and_says_where_they_leave_it() {
+    use camspring::estimate::sim::{simulate, SimSettings};
+    use camspring::verdict::validate::validate;
+    use camspring::{estimate, EstimateOptions, SensorNoise};
+    let spec = Spec::from_toml(DEFAULT_SPEC_TOML).unwrap();
+    let d = design(&spec).unwrap();
+    let designed = *d.law.exponential().unwrap();
+    let band = force_band(&d.pitch_curve, &spec.follower, &spec.tolerances);
+    let verdict = |scale: f64| {
+        // A build whose springs are `scale` times stiffer: every force scales.
+        let built = camspring::ExpLaw {
+            mu_n: scale * designed.mu_n,
+            k2_per_mm: designed.k2_per_mm,
+            f0_n: scale * designed.f0_n,
+        };
+        let settings = SimSettings {
+            seed: 5,
+            ..SimSettings::default()
+        };
+        let (log, _) = simulate(built, 20.0, 230.0, &settings).unwrap();
+        let run = estimate(
+            &log,
+            &EstimateOptions::new(SensorNoise::default()),
+            |_, _| {},
+        )
+        .unwrap();
+        let id = run.identification.as_ref().unwrap();
+        let banded = validate(&designed, id, &run.run, &log.position_mm, 0.03, Some(&band));
+        let flat = validate(&designed, id, &run.run, &log.position_mm, 0.03, None);
+        (banded, flat)
+    };
+    // 5 % stiffer springs: inside what +-10 % springs allow, but more than a flat 3 %.
+    let (banded, flat) = verdict(1.05);
+    assert!(banded.pass, "{:?}", banded.criteria);
+    assert!(banded.band_exits.is_empty());
+    assert!(!flat.pass);
+    // The band's upper edge is the loading force of the stiffest, highest-friction builds
+    // (+16.5 % at Xmax here), the lower edge the unloading force of the softest: 25 % stiffer
+    // or softer springs leave it, named with the side and where.
+    for (scale, side) in [(1.25, "above"), (0.75, "below")] {
+        let (banded, _) = verdict(scale);
+        assert!(!banded.pass, "{scale}");
+        let c = banded
+            .criteria
+            .iter()
+            .find(|c| c.name == "force_band")
+            .unwrap();
+        assert!(!c.pass && c.deviation_percent > 0.0);
+        assert!(!banded.band_exits.is_empty());
+        assert!(
+            banded.band_exits.iter().all(|e| e.side == side),
+            "{:?}",
+            banded.band_exits
+        );
+        let last = banded.band_exits.last().unwrap();
+        assert!(last.to_mm >= last.from_mm && last.worst_n > 0.0);
+    }
+}

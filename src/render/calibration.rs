@@ -355,6 +355,7 @@ pub fn format_validation(v: &Validation) -> String {
         v.ekf_k2_per_mm,
         v.ekf_k2_per_mm_std
     );
+    s.push_str(&band_exit_lines(&v.band_exits));
     s
 }
 
@@ -458,6 +459,19 @@ pub fn validation_svg(v: &Validation, run: &EkfRun) -> String {
     plot::document(&[stiffness, convergence], 620.0, 460.0).to_string()
 }
 
+/// Where a measured curve leaves the band of builds, one line each.
+fn band_exit_lines(exits: &[crate::verdict::validate::BandExit]) -> String {
+    exits
+        .iter()
+        .map(|e| {
+            format!(
+                "  leaves the band of builds {} it at x = {:.2} ... {:.2} mm, by up to {:.2} N\n",
+                e.side, e.from_mm, e.to_mm, e.worst_n
+            )
+        })
+        .collect()
+}
+
 /// The text verdict on a law of any form (the quasi-static curve).
 pub fn format_curve_validation(v: &CurveValidation) -> String {
     let mut s = String::new();
@@ -488,6 +502,7 @@ pub fn format_curve_validation(v: &CurveValidation) -> String {
         v.removed_d2_n_s3_per_mm3,
         v.bins.len()
     );
+    s.push_str(&band_exit_lines(&v.band_exits));
     s
 }
 

@@ -20,6 +20,7 @@
 
 use serde::Serialize;
 
+use crate::cam::tolerance::ForceBand;
 use crate::estimate::ekf::{idx, EkfRun, State};
 use crate::estimate::identify::{Identification, Param, SensorNoise};
 use crate::estimate::log::CalibrationLog;
@@ -47,6 +48,73 @@ pub struct Criterion {
     pub pass: bool,
 }
 
+/// A stretch of the stroke where the measured force leaves the band of builds.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct BandExit {
+    /// Where it starts (mm).
+    pub from_mm: f64,
+    /// Where it ends (mm).
+    pub to_mm: f64,
+    /// Above the band (stiffer than any build within the tolerances) or below it.
+    pub side: &'static str,
+    /// The farthest it gets beyond the band's edge (N).
+    pub worst_n: f64,
+}
+
+/// The flat tolerance of the k2 and stiffness-line criteria when the force is judged by the
+/// band.
+pub const BAND_MODE_TOLERANCE: f64 = 0.03;
+
+/// Judges a measured force curve (`force(x)`) over `lo..hi` against the band of builds: below
+/// the lowest unloading or above the highest loading force of 95 % of builds is outside. The
+/// criterion's deviation is the largest excursion beyond the band as a percent of its edge,
+/// with a tolerance of 0.
+pub fn band_criterion(
+    force: impl Fn(f64) -> f64,
+    band: &ForceBand,
+    lo: f64,
+    hi: f64,
+) -> (Criterion, Vec<BandExit>) {
+    let mut exits: Vec<BandExit> = Vec::new();
+    let mut worst_rel = 0.0_f64;
+    for (j, &x) in band.x_mm.iter().enumerate() {
+        if x < lo || x > hi {
+            continue;
+        }
+        let lower = band.unloading_lo_n[j];
+        let upper = band.loading_hi_n[j].unwrap_or(band.unloading_hi_n[j]);
+        let f = force(x);
+        let (side, beyond, edge) = if f > upper {
+            ("above", f - upper, upper)
+        } else if f < lower {
+            ("below", lower - f, lower)
+        } else {
+            continue;
+        };
+        worst_rel = worst_rel.max(beyond / edge.abs().max(1e-9));
+        match exits.last_mut() {
+            Some(e) if e.side == side && j > 0 && e.to_mm == band.x_mm[j - 1] => {
+                e.to_mm = x;
+                e.worst_n = e.worst_n.max(beyond);
+            }
+            _ => exits.push(BandExit {
+                from_mm: x,
+                to_mm: x,
+                side,
+                worst_n: beyond,
+            }),
+        }
+    }
+    let criterion = Criterion {
+        name: "force_band",
+        what: "the measured force curve against the 95 % band of builds within the spec's tolerances (largest excursion beyond it)",
+        deviation_percent: 100.0 * worst_rel,
+        tolerance_percent: 0.0,
+        pass: exits.is_empty(),
+    };
+    (criterion, exits)
+}
+
 /// The verdict and what it rests on.
 #[derive(Debug, Clone, Serialize)]
 pub struct Validation {
@@ -66,15 +134,20 @@ pub struct Validation {
     pub range_min_mm: f64,
     /// Largest deflection in the log (mm).
     pub range_max_mm: f64,
+    /// Where the identified force leaves the band of builds (band mode).
+    pub band_exits: Vec<BandExit>,
 }
 
-/// Compares a log's identification and EKF run with the designed law.
+/// Compares a log's identification and EKF run with the designed law. With a `band`, the
+/// identified force curve is judged against it (`force_band`) instead of the flat
+/// `force_rms` and `force_max`.
 pub fn validate(
     designed: &ExpLaw,
     id: &Identification,
     run: &EkfRun,
     positions_mm: &[f64],
     tolerance: f64,
+    band: Option<&ForceBand>,
 ) -> Validation {
     let value = |p: Param| id.get(p).value;
     let identified = ExpLaw {
@@ -129,16 +202,26 @@ pub fn validate(
         dsq += fd * fd;
         max = max.max(((fi - fd) / fd).abs());
     }
-    add(
-        "force_rms",
-        "RMS of the identified force-deflection curve against the design over the measured range",
-        100.0 * (sq / dsq.max(1e-300)).sqrt(),
-    );
-    add(
-        "force_max",
-        "largest relative deviation of the identified force from the design over the measured range",
-        100.0 * max,
-    );
+    let mut band_exits = Vec::new();
+    match band {
+        Some(b) => {
+            let (c, exits) = band_criterion(|x| identified.force_n(x), b, lo, hi);
+            criteria.push(c);
+            band_exits = exits;
+        }
+        None => {
+            add(
+                "force_rms",
+                "RMS of the identified force-deflection curve against the design over the measured range",
+                100.0 * (sq / dsq.max(1e-300)).sqrt(),
+            );
+            add(
+                "force_max",
+                "largest relative deviation of the identified force from the design over the measured range",
+                100.0 * max,
+            );
+        }
+    }
     Validation {
         pass: criteria.iter().all(|c| c.pass),
         criteria,
@@ -148,6 +231,7 @@ pub fn validate(
         ekf_k2_per_mm_std: k2_std,
         range_min_mm: lo,
         range_max_mm: hi,
+        band_exits,
     }
 }
 
@@ -187,6 +271,8 @@ pub struct CurveValidation {
     pub range_min_mm: f64,
     /// Largest deflection in the log (mm).
     pub range_max_mm: f64,
+    /// Where the quasi-static curve leaves the band of builds (band mode).
+    pub band_exits: Vec<BandExit>,
 }
 
 /// Bins of the quasi-static curve over the measured range.
@@ -204,6 +290,7 @@ pub fn validate_curve(
     log: &CalibrationLog,
     noise: &SensorNoise,
     tolerance: f64,
+    build_band: Option<&ForceBand>,
 ) -> CurveValidation {
     use nalgebra::{SMatrix, SVector};
     let dt = log.dt_s();
@@ -281,6 +368,38 @@ pub fn validate_curve(
         max = max.max(((b.measured_n - b.designed_n) / b.designed_n).abs());
     }
     let tol = 100.0 * tolerance;
+    if let Some(b) = build_band {
+        // The binned curve, interpolated between bin centres, against the band.
+        let at = |x: f64| {
+            let i = bins
+                .partition_point(|b| b.x_mm < x)
+                .clamp(1, bins.len().max(2) - 1);
+            match (bins.get(i - 1), bins.get(i)) {
+                (Some(a), Some(c)) if c.x_mm > a.x_mm => {
+                    a.measured_n + (c.measured_n - a.measured_n) * (x - a.x_mm) / (c.x_mm - a.x_mm)
+                }
+                (Some(a), _) => a.measured_n,
+                _ => f64::NAN,
+            }
+        };
+        let (lo_b, hi_b) = (
+            bins.first().map_or(lo, |b| b.x_mm),
+            bins.last().map_or(hi, |b| b.x_mm),
+        );
+        let (criterion, band_exits) = band_criterion(at, b, lo_b, hi_b);
+        return CurveValidation {
+            pass: criterion.pass && !bins.is_empty(),
+            criteria: vec![criterion],
+            removed_m_n_s2_per_mm: m,
+            removed_d0_n: d0,
+            removed_d1_n_s_per_mm: d1,
+            removed_d2_n_s3_per_mm3: d2,
+            bins,
+            range_min_mm: lo,
+            range_max_mm: hi,
+            band_exits,
+        };
+    }
     let criteria: Vec<Criterion> = [
         (
             "force_rms",
@@ -312,5 +431,6 @@ pub fn validate_curve(
         bins,
         range_min_mm: lo,
         range_max_mm: hi,
+        band_exits: Vec::new(),
     }
 }
