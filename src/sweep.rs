@@ -297,7 +297,7 @@ pub struct SpringChoice {
 }
 
 /// Preloads tried per spring, from none to the spring's whole travel.
-const PRELOAD_STEPS: usize = 40;
+pub const PRELOAD_STEPS: usize = 40;
 
 /// Ranks the spec's catalogue springs: for each, the design re-synthesised with its rate at
 /// the smallest preload (on a grid of [`PRELOAD_STEPS`] over its travel) whose checks pass, or

@@ -176,7 +176,7 @@ pub fn report_html(
          <a href=\"design.json\">design.json</a>.</p>\n\
          <nav><a href=\"#law\">Law</a><a href=\"#curves\">Force</a><a href=\"#profile\">Cam</a>\
          <a href=\"#stroke\">Pressure angle and stress</a><a href=\"#checks\">Checks</a>\
-         <a href=\"#part\">Part</a><a href=\"#files\">Files</a><a href=\"#spec\">Spec</a></nav>\n",
+         <a href=\"#buy\">To buy</a><a href=\"#part\">Part</a><a href=\"#files\">Files</a><a href=\"#spec\">Spec</a></nav>\n",
         badge(status),
         summary.camspring_version
     );
@@ -303,6 +303,40 @@ pub fn report_html(
     h.push_str("</table>\n");
 
     // Part.
+    // Parts to buy.
+    let sp = &summary.springs;
+    let _ = writeln!(
+        h,
+        "<h2 id=\"buy\">Springs and rollers to buy</h2>\n<table>\
+         <tr><th>item</th><th>count</th><th>what it must do</th></tr>\n\
+         <tr><td>spring, {:.4} N/mm</td><td class=\"num\">{}</td><td>{:.3} N at preload ({:.3} mm), \
+         {:.3} N at full stroke ({:.3} mm): {:.3} mm of working travel</td></tr>",
+        sp.rate_n_per_mm,
+        sp.count,
+        sp.force_at_preload_n,
+        sp.deflection_at_preload_mm,
+        sp.force_at_full_stroke_n,
+        sp.deflection_at_full_stroke_mm,
+        sp.travel_mm
+    );
+    if let Some(r) = &summary.rollers {
+        let mut what = format!(
+            "peak normal load {:.2} N at x = {:.3} mm, ISO 281 mean load {:.2} N, {:.2} revolutions per stroke",
+            r.peak_normal_load_n, r.peak_at_x_mm, r.mean_equivalent_load_n, r.revolutions_per_stroke
+        );
+        if let Some(rpm) = r.speed_rpm {
+            what.push_str(&format!(", {rpm:.1} rpm"));
+        }
+        if let Some(l) = r.l10_strokes {
+            what.push_str(&format!(", L10 life {l:.3e} strokes"));
+        }
+        let _ = writeln!(
+            h,
+            "<tr><td>roller, radius {} mm</td><td class=\"num\">{}</td><td>{what}</td></tr>",
+            summary.follower.roller_radius_mm, r.count
+        );
+    }
+    h.push_str("</table>\n");
     h.push_str("<h2 id=\"part\">Part</h2>\n");
     match (&summary.part, &summary.part_refused) {
         (Some(part), _) => {
