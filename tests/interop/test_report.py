@@ -80,7 +80,8 @@ def test_validation_page_renders_with_the_verdict(tmp_path):
     dom, console, img = render(page, tmp_path, size="1300,1200")
     assert console == [], console
     assert "PASS" in dom
-    for name in ("k2", "stiffness_force_line", "force_rms", "force_max"):
+    # By default the force curve is judged against the band of builds.
+    for name in ("k2", "stiffness_force_line", "force_band"):
         assert name in dom, name
     assert dom.count("<svg") >= 1 and dom.count("<circle") > 100  # the stiffness scatter
     dark = (img < 128).mean()
