@@ -834,6 +834,73 @@ fn read_condition(r: &mut Reader<'_>, i: usize, c: &RawCondition) -> Result<Cond
     }
 }
 
+/// A CSV file named in the spec (a law table, a spring catalogue): its text, read to at
+/// most [`MAX_TABLE_BYTES`], and the errors about it, which name the spec's key and line.
+struct SpecFile {
+    key: &'static str,
+    name: String,
+    line: usize,
+    text: String,
+}
+
+impl SpecFile {
+    /// Reads the file `name` (relative to the spec's folder) that `key` names.
+    fn read(
+        r: &Reader<'_>,
+        key: &'static str,
+        name: &Spanned<String>,
+        what: &str,
+    ) -> Result<SpecFile, SpecError> {
+        use std::io::Read;
+        let mut file = SpecFile {
+            key,
+            name: name.get_ref().clone(),
+            line: r.line(name.span().start),
+            text: String::new(),
+        };
+        let path = r.base.join(&file.name);
+        let mut text = String::new();
+        std::fs::File::open(&path)
+            .and_then(|f| f.take(MAX_TABLE_BYTES + 1).read_to_string(&mut text))
+            .map_err(|e| {
+                file.fail(
+                    format!("{}: {e}", path.display()),
+                    &format!("a readable CSV file ({what}), relative to the spec's folder"),
+                )
+            })?;
+        if text.len() as u64 > MAX_TABLE_BYTES {
+            return Err(file.fail(
+                format!(
+                    "{}: larger than {} KiB",
+                    path.display(),
+                    MAX_TABLE_BYTES >> 10
+                ),
+                "a file of a few thousand rows at most",
+            ));
+        }
+        file.text = text;
+        Ok(file)
+    }
+
+    /// An error about the file, at the spec's line naming it.
+    fn fail(&self, found: String, expected: &str) -> SpecError {
+        SpecError::Invalid {
+            key: self.key.into(),
+            line: Some(self.line),
+            found,
+            expected: expected.to_string(),
+        }
+    }
+
+    /// A CSV reader over the text: a header, `#` comments, cells trimmed.
+    fn csv(&self) -> csv::Reader<&[u8]> {
+        csv::ReaderBuilder::new()
+            .comment(Some(b'#'))
+            .trim(csv::Trim::All)
+            .from_reader(self.text.as_bytes())
+    }
+}
+
 /// The largest law table read.
 const MAX_TABLE_BYTES: u64 = 4 << 20;
 
@@ -841,41 +908,17 @@ const MAX_TABLE_BYTES: u64 = 4 << 20;
 /// column `force_<force unit>` (`x_mm,force_n`, `x_in,force_lbf`, ...), `#` comment lines
 /// allowed. Every error names the spec's `law.table` line and the table's line.
 fn read_table(r: &mut Reader<'_>, table: &Spanned<String>) -> Result<Vec<(f64, f64)>, SpecError> {
-    use std::io::Read;
-    let name = table.get_ref();
-    let path = r.base.join(name);
-    let spec_line = r.line(table.span().start);
     // Validation of the rows names `law.table`: give it this line.
-    r.remember("law.table", table.span().start, quoted(name), String::new());
-    let fail = |found: String, expected: &str| SpecError::Invalid {
-        key: "law.table".into(),
-        line: Some(spec_line),
-        found,
-        expected: expected.to_string(),
-    };
-    let mut text = String::new();
-    std::fs::File::open(&path)
-        .and_then(|f| f.take(MAX_TABLE_BYTES + 1).read_to_string(&mut text))
-        .map_err(|e| {
-            fail(
-                format!("{}: {e}", path.display()),
-                "a readable CSV file (x_mm,force_n), relative to the spec's folder",
-            )
-        })?;
-    if text.len() as u64 > MAX_TABLE_BYTES {
-        return Err(fail(
-            format!(
-                "{}: larger than {} KiB",
-                path.display(),
-                MAX_TABLE_BYTES >> 10
-            ),
-            "a table of a few thousand rows at most",
-        ));
-    }
-    let mut rdr = csv::ReaderBuilder::new()
-        .comment(Some(b'#'))
-        .trim(csv::Trim::All)
-        .from_reader(text.as_bytes());
+    r.remember(
+        "law.table",
+        table.span().start,
+        quoted(table.get_ref()),
+        String::new(),
+    );
+    let file = SpecFile::read(r, "law.table", table, "x_mm,force_n")?;
+    let name = &file.name;
+    let fail = |found: String, expected: &str| file.fail(found, expected);
+    let mut rdr = file.csv();
     let header = rdr
         .headers()
         .map_err(|e| fail(format!("{name}: {e}"), "a header x_mm,force_n"))?
@@ -948,35 +991,15 @@ fn read_catalogue(
     r: &mut Reader<'_>,
     name: &Spanned<String>,
 ) -> Result<crate::model::SpringCatalogue, SpecError> {
-    use std::io::Read;
-    let file = name.get_ref();
-    let path = r.base.join(file);
-    let spec_line = r.line(name.span().start);
-    let fail = |found: String, expected: &str| SpecError::Invalid {
-        key: "follower.spring_catalogue".into(),
-        line: Some(spec_line),
-        found,
-        expected: expected.to_string(),
-    };
-    let mut text = String::new();
-    std::fs::File::open(&path)
-        .and_then(|f| f.take(MAX_TABLE_BYTES + 1).read_to_string(&mut text))
-        .map_err(|e| {
-            fail(
-                format!("{}: {e}", path.display()),
-                "a readable CSV file, relative to the spec's folder",
-            )
-        })?;
-    if text.len() as u64 > MAX_TABLE_BYTES {
-        return Err(fail(
-            format!("{file}: too large"),
-            "a catalogue of a few thousand springs at most",
-        ));
-    }
-    let mut rdr = csv::ReaderBuilder::new()
-        .comment(Some(b'#'))
-        .trim(csv::Trim::All)
-        .from_reader(text.as_bytes());
+    let spec_file = SpecFile::read(
+        r,
+        "follower.spring_catalogue",
+        name,
+        "part,rate_n_per_mm,...",
+    )?;
+    let file = &spec_file.name;
+    let fail = |found: String, expected: &str| spec_file.fail(found, expected);
+    let mut rdr = spec_file.csv();
     let header = rdr
         .headers()
         .map_err(|e| fail(format!("{file}: {e}"), "a header"))?
@@ -1039,7 +1062,7 @@ fn read_catalogue(
         return Err(fail(format!("{file}: no springs"), "at least one spring"));
     }
     Ok(crate::model::SpringCatalogue {
-        source: file.clone(),
+        source: file.to_string(),
         springs,
     })
 }

@@ -1,22 +1,9 @@
 //! The real binary in a temporary folder: outputs, exit codes and error messages.
 
-use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Command;
 
-fn camspring(dir: &Path, args: &[&str]) -> Output {
-    let out = Command::new(env!("CARGO_BIN_EXE_camspring"))
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .unwrap();
-    eprintln!(
-        "camspring {args:?} -> {:?}\n--- stdout\n{}\n--- stderr\n{}",
-        out.status.code(),
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
+mod common;
+use common::camspring;
 
 fn spec_path(name: &str) -> String {
     format!("{}/specs/{name}", env!("CARGO_MANIFEST_DIR"))

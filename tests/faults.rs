@@ -9,6 +9,9 @@ use std::time::{Duration, Instant};
 
 use rand::{Rng, SeedableRng};
 
+mod common;
+use common::camspring;
+
 const ALL_OUTPUTS: [&str; 11] = [
     "design.json",
     "report.html",
@@ -38,17 +41,6 @@ const MARKED: [&str; 9] = [
 
 fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_camspring"))
-}
-
-fn camspring(dir: &Path, args: &[&str]) -> Output {
-    let out = bin().args(args).current_dir(dir).output().unwrap();
-    eprintln!(
-        "camspring {args:?} -> {:?}\n--- stdout\n{}\n--- stderr\n{}",
-        out.status.code(),
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
 }
 
 fn spec(name: &str) -> String {

@@ -2,25 +2,12 @@
 //! (design, checks, simulate, validate) for a tabulated law, judged by independent truth.
 
 use std::path::Path;
-use std::process::{Command, Output};
 
 use camspring::model::{ForceLaw, LawSpec, TableLaw};
 use camspring::{design, spec::DEFAULT_SPEC_TOML, Spec};
 
-fn camspring(dir: &Path, args: &[&str]) -> Output {
-    let out = Command::new(env!("CARGO_BIN_EXE_camspring"))
-        .args(args)
-        .current_dir(dir)
-        .output()
-        .unwrap();
-    eprintln!(
-        "camspring {args:?} -> {:?}\n--- stdout\n{}\n--- stderr\n{}",
-        out.status.code(),
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
+mod common;
+use common::camspring;
 
 /// The paper spec with its law replaced by a table of `rows` points of that law.
 fn paper_as_table(rows: usize) -> (Spec, Spec) {

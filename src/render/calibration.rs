@@ -335,17 +335,7 @@ pub fn format_validation(v: &Validation) -> String {
         v.range_min_mm,
         v.range_max_mm
     );
-    for c in &v.criteria {
-        let _ = writeln!(
-            s,
-            "  {}  {:<22} {:>8.3} % (tolerance {:.3} %)  {}",
-            if c.pass { "PASS" } else { "FAIL" },
-            c.name,
-            c.deviation_percent,
-            c.tolerance_percent,
-            c.what
-        );
-    }
+    s.push_str(&criteria_lines(&v.criteria));
     let _ = writeln!(
         s,
         "  identified F = {:.6} N * exp({:.6} /mm * x) + {:.6} N; EKF k2 = {:.6} +- {:.6} /mm",
@@ -459,6 +449,23 @@ pub fn validation_svg(v: &Validation, run: &EkfRun) -> String {
     plot::document(&[stiffness, convergence], 620.0, 460.0).to_string()
 }
 
+/// A verdict's criteria, one line each.
+fn criteria_lines(criteria: &[crate::verdict::validate::Criterion]) -> String {
+    criteria
+        .iter()
+        .map(|c| {
+            format!(
+                "  {}  {:<22} {:>8.3} % (tolerance {:.3} %)  {}\n",
+                if c.pass { "PASS" } else { "FAIL" },
+                c.name,
+                c.deviation_percent,
+                c.tolerance_percent,
+                c.what
+            )
+        })
+        .collect()
+}
+
 /// Where a measured curve leaves the band of builds, one line each.
 fn band_exit_lines(exits: &[crate::verdict::validate::BandExit]) -> String {
     exits
@@ -482,17 +489,7 @@ pub fn format_curve_validation(v: &CurveValidation) -> String {
         v.range_min_mm,
         v.range_max_mm
     );
-    for c in &v.criteria {
-        let _ = writeln!(
-            s,
-            "  {}  {:<22} {:>8.3} % (tolerance {:.3} %)  {}",
-            if c.pass { "PASS" } else { "FAIL" },
-            c.name,
-            c.deviation_percent,
-            c.tolerance_percent,
-            c.what
-        );
-    }
+    s.push_str(&criteria_lines(&v.criteria));
     let _ = writeln!(
         s,
         "  taken out of the force: m = {:.4e} N s^2/mm, d0 = {:.4} N, d1 = {:.4} N s/mm, d2 = {:.3e} N s^3/mm^3; {} bins",

@@ -372,6 +372,21 @@ pub fn report_html(
     h
 }
 
+/// The rows of a verdict's criteria table.
+fn criteria_rows(h: &mut String, criteria: &[crate::verdict::validate::Criterion]) {
+    for c in criteria {
+        let _ = writeln!(
+            h,
+            "<tr><td>{}</td><td>{}</td><td class=\"num\">{:.3} %</td><td class=\"num\">{:.3} %</td><td>{}</td></tr>",
+            badge(if c.pass { "pass" } else { "fail" }),
+            escape(c.name),
+            c.deviation_percent,
+            c.tolerance_percent,
+            escape(c.what)
+        );
+    }
+}
+
 /// `validation.html`: the verdict, the criteria and the plots of `validation.svg`.
 pub fn validation_html(
     v: &crate::verdict::validate::Validation,
@@ -403,17 +418,7 @@ pub fn validation_html(
         v.range_max_mm,
         log = escape(log_name),
     );
-    for c in &v.criteria {
-        let _ = writeln!(
-            h,
-            "<tr><td>{}</td><td>{}</td><td class=\"num\">{:.3} %</td><td class=\"num\">{:.3} %</td><td>{}</td></tr>",
-            badge(if c.pass { "pass" } else { "fail" }),
-            escape(c.name),
-            c.deviation_percent,
-            c.tolerance_percent,
-            escape(c.what)
-        );
-    }
+    criteria_rows(&mut h, &v.criteria);
     h.push_str("</table>\n<h2>Stiffness against force, and convergence</h2>\n");
     h.push_str(&figure(
         validation_svg,
@@ -453,17 +458,7 @@ pub fn curve_validation_html(
         v.range_max_mm,
         log = escape(log_name),
     );
-    for c in &v.criteria {
-        let _ = writeln!(
-            h,
-            "<tr><td>{}</td><td>{}</td><td class=\"num\">{:.3} %</td><td class=\"num\">{:.3} %</td><td>{}</td></tr>",
-            badge(if c.pass { "pass" } else { "fail" }),
-            escape(c.name),
-            c.deviation_percent,
-            c.tolerance_percent,
-            escape(c.what)
-        );
-    }
+    criteria_rows(&mut h, &v.criteria);
     h.push_str("</table>\n<h2>Force curve</h2>\n");
     h.push_str(&figure(
         validation_svg,

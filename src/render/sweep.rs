@@ -139,10 +139,7 @@ pub fn sweep_svg(axes: &[Axis], points: &[SweepPoint], limits: &ChecksSpec) -> S
             "Peak contact stress",
             "contact stress (MPa)",
             &|r| r.max_contact_stress_mpa,
-            Some((
-                limits.max_contact_stress_mpa,
-                "limit (the spec's; per material on a material axis)",
-            )),
+            Some((limits.max_contact_stress_mpa, "limit")),
         ),
     ];
     plot::document(&panels, 520.0, 440.0).to_string()

@@ -368,61 +368,56 @@ pub fn validate_curve(
         max = max.max(((b.measured_n - b.designed_n) / b.designed_n).abs());
     }
     let tol = 100.0 * tolerance;
-    if let Some(b) = build_band {
-        // The binned curve, interpolated between bin centres, against the band.
-        let at = |x: f64| {
-            let i = bins
-                .partition_point(|b| b.x_mm < x)
-                .clamp(1, bins.len().max(2) - 1);
-            match (bins.get(i - 1), bins.get(i)) {
-                (Some(a), Some(c)) if c.x_mm > a.x_mm => {
-                    a.measured_n + (c.measured_n - a.measured_n) * (x - a.x_mm) / (c.x_mm - a.x_mm)
+    let (criteria, band_exits) = match build_band {
+        Some(b) => {
+            // The binned curve, interpolated between bin centres, against the band.
+            let at = |x: f64| {
+                let i = bins
+                    .partition_point(|b| b.x_mm < x)
+                    .clamp(1, bins.len().max(2) - 1);
+                match (bins.get(i - 1), bins.get(i)) {
+                    (Some(a), Some(c)) if c.x_mm > a.x_mm => {
+                        a.measured_n
+                            + (c.measured_n - a.measured_n) * (x - a.x_mm) / (c.x_mm - a.x_mm)
+                    }
+                    (Some(a), _) => a.measured_n,
+                    _ => f64::NAN,
                 }
-                (Some(a), _) => a.measured_n,
-                _ => f64::NAN,
-            }
-        };
-        let (lo_b, hi_b) = (
-            bins.first().map_or(lo, |b| b.x_mm),
-            bins.last().map_or(hi, |b| b.x_mm),
-        );
-        let (criterion, band_exits) = band_criterion(at, b, lo_b, hi_b);
-        return CurveValidation {
-            pass: criterion.pass && !bins.is_empty(),
-            criteria: vec![criterion],
-            removed_m_n_s2_per_mm: m,
-            removed_d0_n: d0,
-            removed_d1_n_s_per_mm: d1,
-            removed_d2_n_s3_per_mm3: d2,
-            bins,
-            range_min_mm: lo,
-            range_max_mm: hi,
-            band_exits,
-        };
-    }
-    let criteria: Vec<Criterion> = [
-        (
-            "force_rms",
-            "RMS of the quasi-static force-deflection curve (inertia, damping and Coulomb friction removed) against the design over the measured range",
-            100.0 * (sq / dsq.max(1e-300)).sqrt(),
-        ),
-        (
-            "force_max",
-            "largest relative deviation of the quasi-static force from the design over the measured range",
-            100.0 * max,
-        ),
-    ]
-    .into_iter()
-    .map(|(name, what, deviation)| Criterion {
-        name,
-        what,
-        deviation_percent: deviation,
-        tolerance_percent: tol,
-        pass: deviation.is_finite() && deviation <= tol && !bins.is_empty(),
-    })
-    .collect();
+            };
+            let (lo_b, hi_b) = (
+                bins.first().map_or(lo, |b| b.x_mm),
+                bins.last().map_or(hi, |b| b.x_mm),
+            );
+            let (criterion, exits) = band_criterion(at, b, lo_b, hi_b);
+            (vec![criterion], exits)
+        }
+        None => {
+            let criteria = [
+                (
+                    "force_rms",
+                    "RMS of the quasi-static force-deflection curve (inertia, damping and Coulomb friction removed) against the design over the measured range",
+                    100.0 * (sq / dsq.max(1e-300)).sqrt(),
+                ),
+                (
+                    "force_max",
+                    "largest relative deviation of the quasi-static force from the design over the measured range",
+                    100.0 * max,
+                ),
+            ]
+            .into_iter()
+            .map(|(name, what, deviation)| Criterion {
+                name,
+                what,
+                deviation_percent: deviation,
+                tolerance_percent: tol,
+                pass: deviation.is_finite() && deviation <= tol,
+            })
+            .collect();
+            (criteria, Vec::new())
+        }
+    };
     CurveValidation {
-        pass: criteria.iter().all(|c| c.pass),
+        pass: !bins.is_empty() && criteria.iter().all(|c: &Criterion| c.pass),
         criteria,
         removed_m_n_s2_per_mm: m,
         removed_d0_n: d0,
@@ -431,6 +426,6 @@ pub fn validate_curve(
         bins,
         range_min_mm: lo,
         range_max_mm: hi,
-        band_exits: Vec::new(),
+        band_exits,
     }
 }

@@ -78,3 +78,19 @@ pub fn rk4(f: impl Fn(f64, f64) -> f64, x0: f64, y0: f64, x1: f64, steps: usize)
     }
     y
 }
+
+/// Runs the real binary in `dir` and prints what it said (shown when a test fails).
+pub fn camspring(dir: &std::path::Path, args: &[&str]) -> std::process::Output {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_camspring"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .unwrap();
+    eprintln!(
+        "camspring {args:?} -> {:?}\n--- stdout\n{}\n--- stderr\n{}",
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
