@@ -169,8 +169,8 @@ pub fn designed_law(spec: &Spec) -> Result<ForceLaw> {
 pub fn designed_exponential_law(spec: &Spec, what: &str) -> Result<ExpLaw> {
     match designed_law(spec)? {
         ForceLaw::Exponential(l) => Ok(l),
-        ForceLaw::Table(_) => Err(Error::Argument(format!(
-            "{what}: the spec's law is a table; the EKF's model (stiffness affine in force, \
+        ForceLaw::Table(_) | ForceLaw::Polynomial(_) => Err(Error::Argument(format!(
+            "{what}: the spec's law is not exponential; the EKF's model (stiffness affine in force, \
              sigma = k2 (F - F0)) holds only for an exponential law. Use `identify` or \
              `validate`, which compare the quasi-static force curve with a table law"
         ))),
@@ -513,7 +513,7 @@ pub fn run_validate(
             let html = crate::render::html::validation_html(&v, &svg_text, &log_name);
             (Verdict::Law(v), svg_text, html)
         }
-        ForceLaw::Table(_) => {
+        ForceLaw::Table(_) | ForceLaw::Polynomial(_) => {
             let v = validate_curve(&designed, &log, &opts.noise, tolerance, band.as_ref());
             let svg_text = curve_validation_svg(&v);
             let html = crate::render::html::curve_validation_html(&v, &svg_text, &log_name);

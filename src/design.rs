@@ -90,6 +90,9 @@ pub fn law_of(spec: &Spec) -> Result<SolvedLaw, LawError> {
             xmax_mm,
         } => solve_conditions(conditions, *xmax_mm),
         LawSpec::Table { table, .. } => Ok(SolvedLaw::as_given(ForceLaw::Table(table.clone()))),
+        LawSpec::Polynomial { law, .. } => {
+            Ok(SolvedLaw::as_given(ForceLaw::Polynomial(law.clone())))
+        }
     }
 }
 

@@ -204,8 +204,10 @@ pub struct LawSummary {
     pub force_at_xmax_n: f64,
     /// Relative residuals of the paper's design conditions (targets form).
     pub residuals: Option<Residuals>,
-    /// How the spec states the law: `targets`, `given`, `conditions` or `table`.
+    /// How the spec states the law: `targets`, `given`, `conditions`, `polynomial` or `table`.
     pub form: &'static str,
+    /// The law in one line (the formula, or the table's size and end forces).
+    pub description: String,
     /// Relative residual of each condition (conditions form).
     pub condition_residuals: Option<Vec<f64>>,
     /// Table points (table form).
@@ -470,10 +472,11 @@ pub fn summarize(design: &Design, outputs: &[&str]) -> DesignSummary {
             force_at_xmax_n: law.force_n(xmax),
             residuals: design.law.residuals,
             form: spec.law.form(),
+            description: law.describe(),
             condition_residuals: design.law.condition_residuals.clone(),
             table_points: match law {
                 ForceLaw::Table(t) => Some(t.x_mm.len()),
-                ForceLaw::Exponential(_) => None,
+                ForceLaw::Exponential(_) | ForceLaw::Polynomial(_) => None,
             },
             table_max_rel_error: table_error(design),
         },

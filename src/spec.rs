@@ -162,6 +162,7 @@ struct RawLaw {
     f0: Q,
     conditions: Option<Spanned<Vec<RawCondition>>>,
     table: Option<Spanned<String>>,
+    polynomial: Option<Spanned<Vec<Spanned<RawValue>>>>,
 }
 
 /// `{ at = "15 mm", force = "800 N" }`, `{ at = ..., stiffness = ... }` or
@@ -732,6 +733,10 @@ fn read_law(raw: &RawSpec, r: &mut Reader<'_>) -> Result<LawSpec, SpecError> {
             law_raw.conditions.as_ref().map(|c| c.span().start),
         ),
         ("table", law_raw.table.as_ref().map(|t| t.span().start)),
+        (
+            "polynomial",
+            law_raw.polynomial.as_ref().map(|p| p.span().start),
+        ),
     ];
     let given_forms: Vec<(&str, usize)> = forms
         .iter()
@@ -758,6 +763,26 @@ fn read_law(raw: &RawSpec, r: &mut Reader<'_>) -> Result<LawSpec, SpecError> {
             .collect::<Result<Vec<_>, _>>()?;
         return Ok(LawSpec::Conditions {
             conditions,
+            xmax_mm: xmax,
+        });
+    }
+    if let Some(poly) = &law_raw.polynomial {
+        // The rules on the whole polynomial name `law.polynomial`: give it this line.
+        r.remember(
+            "law.polynomial",
+            poly.span().start,
+            String::new(),
+            String::new(),
+        );
+        let xmax = r.required("law.xmax", &law_raw.xmax, D::Length)?;
+        let coefficients = poly
+            .get_ref()
+            .iter()
+            .enumerate()
+            .map(|(k, c)| polynomial_coefficient(r, k, c))
+            .collect::<Result<Vec<f64>, _>>()?;
+        return Ok(LawSpec::Polynomial {
+            law: crate::model::PolyLaw { coefficients },
             xmax_mm: xmax,
         });
     }
@@ -791,6 +816,54 @@ fn read_law(raw: &RawSpec, r: &mut Reader<'_>) -> Result<LawSpec, SpecError> {
         c0: r.required("law.c0", &law_raw.c0, D::Dimensionless)?,
         delta0_mm: r.required("law.delta0", &law_raw.delta0, D::Length)?,
     }))
+}
+
+/// Coefficient `k` of a polynomial law: N for k = 0, N/mm for k = 1, N/mm^k above (a bare
+/// number is read in that unit; `N/mm2` and `N/mm^2` are both accepted).
+fn polynomial_coefficient(
+    r: &mut Reader<'_>,
+    k: usize,
+    raw: &Spanned<RawValue>,
+) -> Result<f64, SpecError> {
+    let key = format!("law.polynomial[{k}]");
+    match k {
+        0 => r.quantity_value(&key, raw, Dimension::Force),
+        1 => r.quantity_value(&key, raw, Dimension::Stiffness),
+        _ => {
+            let start = raw.span().start;
+            let unit = format!("N/mm^{k}");
+            let (value, found) = match raw.get_ref() {
+                RawValue::Number(n) => (Some(*n), format!("{n}")),
+                RawValue::Text(t) => {
+                    let text = t.trim();
+                    let split = text
+                        .find(|c: char| c.is_ascii_alphabetic())
+                        .unwrap_or(text.len());
+                    let (number, written_unit) = (text[..split].trim(), text[split..].trim());
+                    let unit_ok = written_unit.is_empty()
+                        || written_unit == unit
+                        || written_unit == format!("N/mm{k}");
+                    let value = number
+                        .parse::<f64>()
+                        .ok()
+                        .filter(|_| unit_ok && number.len() <= crate::units::MAX_NUMBER_CHARS);
+                    (value, quoted(t))
+                }
+            };
+            match value.filter(|v| v.is_finite()) {
+                Some(v) => {
+                    r.remember(&key, start, found, crate::model::found_value(v, ""));
+                    Ok(v)
+                }
+                None => Err(r.invalid(
+                    &key,
+                    start,
+                    found,
+                    format!("a number in {unit}, such as \"2 {unit}\""),
+                )),
+            }
+        }
+    }
 }
 
 fn read_condition(r: &mut Reader<'_>, i: usize, c: &RawCondition) -> Result<Condition, SpecError> {

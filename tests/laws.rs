@@ -296,3 +296,47 @@ fn the_designers_conditions_solve_from_a_spec_file() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("conditions"));
 }
+
+#[test]
+fn a_quadratic_polynomial_law_is_realised_and_a_falling_one_is_refused() {
+    let d = tempfile::tempdir().unwrap();
+    let text = format!(
+        "[law]\nxmax = \"15 mm\"\npolynomial = [\"20 N\", \"10 N/mm\", \"2 N/mm^2\"]\n[follower]\n{FOLLOWER}\n"
+    );
+    let spec = Spec::from_toml(&text).unwrap();
+    assert_eq!(spec.law.form(), "polynomial");
+    let des = design(&spec).unwrap();
+    // The forward model (from the cam's geometry) against the quadratic itself.
+    for r in des.forces.iter().step_by(7) {
+        let rel = (r.loading_n.unwrap() / quadratic(r.x_mm) - 1.0).abs();
+        assert!(rel < 1e-3, "at {} mm: {rel}", r.x_mm);
+    }
+    let out = camspring(d.path(), &["design", "-o", "p", "--json"]);
+    assert!(out.status.success());
+    std::fs::write(d.path().join("poly.toml"), &text).unwrap();
+    let out = camspring(d.path(), &["design", "poly.toml", "-o", "p", "--json"]);
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["law"]["form"], "polynomial");
+    assert!(v["law"]["description"]
+        .as_str()
+        .unwrap()
+        .contains("2 N/mm^2 x^2"));
+    // Softening inside the stroke: refused, naming the key and its line.
+    let falling = text.replace("\"2 N/mm^2\"", "\"-8 N/mm^2\"");
+    std::fs::write(d.path().join("f.toml"), falling).unwrap();
+    let out = camspring(d.path(), &["design", "f.toml"]);
+    assert_eq!(out.status.code(), Some(2));
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        e.contains("law.polynomial") && e.contains("line 3") && e.contains("falling"),
+        "{e}"
+    );
+    // A wrong unit on a coefficient names that coefficient.
+    std::fs::write(d.path().join("u.toml"), text.replace("2 N/mm^2", "2 N/mm")).unwrap();
+    let e =
+        String::from_utf8_lossy(&camspring(d.path(), &["design", "u.toml"]).stderr).into_owned();
+    assert!(
+        e.contains("law.polynomial[2]") && e.contains("N/mm^2"),
+        "{e}"
+    );
+}

@@ -296,6 +296,7 @@ pub fn drawing_svg(design: &Design, part: &Part) -> String {
                 .join(", ")
         ),
         crate::model::LawSpec::Table { source, .. } => format!("spec: law tabulated in {source}"),
+        crate::model::LawSpec::Polynomial { .. } => "spec: polynomial law".to_string(),
     };
     let rows = [
         format!("camspring cam part: {}", spec.name),

@@ -276,6 +276,44 @@ fn steffen_slopes(x: &[f64], y: &[f64]) -> Vec<f64> {
     m
 }
 
+/// A polynomial force law F(x) = c0 + c1 x + c2 x^2 + ... (N, N/mm, N/mm^2, ...): a quadratic
+/// for antagonistic actuators, or any smooth stiffening curve.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PolyLaw {
+    /// Coefficients from the constant up: c_k in N/mm^k.
+    pub coefficients: Vec<f64>,
+}
+
+impl PolyLaw {
+    /// Force at `x_mm` (Horner).
+    pub fn force_n(&self, x_mm: f64) -> f64 {
+        self.coefficients
+            .iter()
+            .rev()
+            .fold(0.0, |acc, c| acc * x_mm + c)
+    }
+
+    /// Stiffness dF/dx at `x_mm`.
+    pub fn stiffness_n_per_mm(&self, x_mm: f64) -> f64 {
+        self.coefficients
+            .iter()
+            .enumerate()
+            .skip(1)
+            .rev()
+            .fold(0.0, |acc, (k, c)| acc * x_mm + k as f64 * c)
+    }
+
+    /// Work from 0 to `x_mm` (N mm): the sum of c_k x^(k+1) / (k+1).
+    pub fn energy_nmm(&self, x_mm: f64) -> f64 {
+        self.coefficients
+            .iter()
+            .enumerate()
+            .rev()
+            .fold(0.0, |acc, (k, c)| acc * x_mm + c / (k + 1) as f64)
+            * x_mm
+    }
+}
+
 /// A force law over the stroke: what the cam synthesis, the forward model and the plots read.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 #[serde(tag = "form", rename_all = "snake_case")]
@@ -284,6 +322,8 @@ pub enum ForceLaw {
     Exponential(ExpLaw),
     /// A tabulated monotone law.
     Table(TableLaw),
+    /// A polynomial law.
+    Polynomial(PolyLaw),
 }
 
 impl ForceLaw {
@@ -292,6 +332,7 @@ impl ForceLaw {
         match self {
             ForceLaw::Exponential(l) => l.force_n(x_mm),
             ForceLaw::Table(t) => t.force_n(x_mm),
+            ForceLaw::Polynomial(p) => p.force_n(x_mm),
         }
     }
 
@@ -300,6 +341,7 @@ impl ForceLaw {
         match self {
             ForceLaw::Exponential(l) => l.stiffness_n_per_mm(x_mm),
             ForceLaw::Table(t) => t.stiffness_n_per_mm(x_mm),
+            ForceLaw::Polynomial(p) => p.stiffness_n_per_mm(x_mm),
         }
     }
 
@@ -308,6 +350,7 @@ impl ForceLaw {
         match self {
             ForceLaw::Exponential(l) => l.energy_nmm(x_mm),
             ForceLaw::Table(t) => t.energy_nmm(x_mm),
+            ForceLaw::Polynomial(p) => p.energy_nmm(x_mm),
         }
     }
 
@@ -326,6 +369,19 @@ impl ForceLaw {
                     t.force_n[0], t.x_mm[0], t.force_n[n - 1], t.x_mm[n - 1]
                 )
             }
+            ForceLaw::Polynomial(p) => {
+                let terms: Vec<String> = p
+                    .coefficients
+                    .iter()
+                    .enumerate()
+                    .map(|(k, c)| match k {
+                        0 => format!("{c} N"),
+                        1 => format!("{c} N/mm x"),
+                        _ => format!("{c} N/mm^{k} x^{k}"),
+                    })
+                    .collect();
+                format!("F = {}", terms.join(" + "))
+            }
         }
     }
 
@@ -333,7 +389,7 @@ impl ForceLaw {
     pub fn exponential(&self) -> Option<&ExpLaw> {
         match self {
             ForceLaw::Exponential(l) => Some(l),
-            ForceLaw::Table(_) => None,
+            ForceLaw::Table(_) | ForceLaw::Polynomial(_) => None,
         }
     }
 }
@@ -377,6 +433,13 @@ pub enum LawSpec {
         /// The stroke.
         xmax_mm: f64,
     },
+    /// A polynomial force law.
+    Polynomial {
+        /// The law.
+        law: PolyLaw,
+        /// The stroke.
+        xmax_mm: f64,
+    },
     /// A tabulated force curve.
     Table {
         /// The law through the table's points.
@@ -395,16 +458,18 @@ impl LawSpec {
             LawSpec::Targets(t) => t.xmax_mm,
             LawSpec::Given { xmax_mm, .. }
             | LawSpec::Conditions { xmax_mm, .. }
+            | LawSpec::Polynomial { xmax_mm, .. }
             | LawSpec::Table { xmax_mm, .. } => *xmax_mm,
         }
     }
 
-    /// The form's name: `targets`, `given`, `conditions` or `table`.
+    /// The form's name: `targets`, `given`, `conditions`, `polynomial` or `table`.
     pub fn form(&self) -> &'static str {
         match self {
             LawSpec::Targets(_) => "targets",
             LawSpec::Given { .. } => "given",
             LawSpec::Conditions { .. } => "conditions",
+            LawSpec::Polynomial { .. } => "polynomial",
             LawSpec::Table { .. } => "table",
         }
     }
@@ -446,6 +511,18 @@ mod tests {
         for (x, f) in points {
             assert!((t.force_n(x) - f).abs() < 1e-12 * f);
         }
+    }
+
+    #[test]
+    fn a_polynomial_has_consistent_force_stiffness_and_energy() {
+        let p = PolyLaw {
+            coefficients: vec![20.0, 10.0, 2.0, 0.1],
+        };
+        let x: f64 = 7.5;
+        assert!((p.force_n(x) - (20.0 + 10.0 * x + 2.0 * x * x + 0.1 * x.powi(3))).abs() < 1e-12);
+        assert!((p.stiffness_n_per_mm(x) - (10.0 + 4.0 * x + 0.3 * x * x)).abs() < 1e-12);
+        let e = 20.0 * x + 5.0 * x * x + 2.0 * x.powi(3) / 3.0 + 0.025 * x.powi(4);
+        assert!((p.energy_nmm(x) - e).abs() < 1e-9);
     }
 
     #[test]

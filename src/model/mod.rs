@@ -33,7 +33,7 @@ pub use follower::{
     CatalogueSpring, Follower, FrictionCorrection, FrictionSource, RollerBearing,
     SpringArrangement, SpringCatalogue, MAX_FRICTION,
 };
-pub use law::{Condition, ExpLaw, ForceLaw, LawSpec, LawTargets, TableLaw};
+pub use law::{Condition, ExpLaw, ForceLaw, LawSpec, LawTargets, PolyLaw, TableLaw};
 pub use machining::{Coolant, Dialect, MachiningSpec, WorkOffset};
 pub use part::{Hole, Material, PartSpec, MATERIALS};
 
@@ -62,6 +62,8 @@ pub mod limits {
     pub const MAX_LENGTH_MM: f64 = 10_000.0;
     /// Thickest plate (mm).
     pub const MAX_THICKNESS_MM: f64 = 1_000.0;
+    /// Most coefficients of a polynomial law (degree 7).
+    pub const MAX_POLYNOMIAL_TERMS: usize = 8;
     /// Most mounting holes.
     pub const MAX_HOLES: usize = 100;
     /// Largest cutter (mm).
@@ -528,6 +530,44 @@ fn validate_law(law: &LawSpec) -> Result<(), SpecError> {
                         check(&key("force"), force_n, force, "N")?;
                         check(&key("stiffness"), stiffness_n_per_mm, stiffness, "N/mm")?;
                     }
+                }
+            }
+            Ok(())
+        }
+        LawSpec::Polynomial { law, xmax_mm } => {
+            check("law.xmax", *xmax_mm, stroke(), "mm")?;
+            let n = law.coefficients.len();
+            if !(1..=MAX_POLYNOMIAL_TERMS).contains(&n) {
+                return Err(invalid(
+                    "law.polynomial",
+                    format!("{n} coefficients"),
+                    format!("1 to {MAX_POLYNOMIAL_TERMS} coefficients, from the constant (N) up"),
+                ));
+            }
+            for (k, c) in law.coefficients.iter().enumerate() {
+                check(&format!("law.polynomial[{k}]"), *c, Range::Any, "")?;
+            }
+            // Positive and never softening over the stroke, checked on a fine grid (a
+            // polynomial of this degree cannot turn between grid points this close).
+            let steps = 2000;
+            for i in 0..=steps {
+                let x = xmax_mm * i as f64 / steps as f64;
+                let (f, s) = (law.force_n(x), law.stiffness_n_per_mm(x));
+                let fails = if !(f > 0.0 && f < MAX_FORCE_N) {
+                    Some(format!("a force of {f:.6} N at x = {x} mm"))
+                } else if s < 0.0 {
+                    Some(format!(
+                        "a falling force (stiffness {s:.6} N/mm) at x = {x} mm"
+                    ))
+                } else {
+                    None
+                };
+                if let Some(found) = fails {
+                    return Err(invalid(
+                        "law.polynomial",
+                        found,
+                        format!("a positive force below {MAX_FORCE_N:e} N that never decreases over 0 ... law.xmax"),
+                    ));
                 }
             }
             Ok(())

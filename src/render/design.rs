@@ -34,10 +34,8 @@ pub fn format_design(s: &DesignSummary, written: &[PathBuf]) -> String {
         _ => {
             let _ = writeln!(
                 o,
-                "  law      tabulated, {} points: F(0) = {:.4} N, F(Xmax) = {:.4} N (monotone cubic)",
-                l.table_points.unwrap_or(0),
-                l.force_at_zero_n,
-                l.force_at_xmax_n
+                "  law      {} ({}): F(0) = {:.4} N, F(Xmax) = {:.4} N",
+                l.description, l.form, l.force_at_zero_n, l.force_at_xmax_n
             );
         }
     }

@@ -159,10 +159,10 @@ pub fn report_html(
     let mut h = String::with_capacity(256 * 1024);
     let name = escape(&summary.name);
     let run = escape(&summary.run_id);
-    let kind = if summary.law.form == "table" {
-        "Tabulated"
-    } else {
-        "Exponential"
+    let kind = match summary.law.form {
+        "table" => "Tabulated",
+        "polynomial" => "Polynomial",
+        _ => "Exponential",
     };
     let status = summary.status.as_str();
     let _ = write!(
@@ -191,12 +191,20 @@ pub fn report_html(
                 law.form
             );
         }
-        _ => {
+        _ if law.form == "table" => {
             let _ = write!(
                 h,
                 "<h2 id=\"law\">Force law</h2>\n<p><b>Tabulated law</b>, {} points joined by a monotone cubic (Steffen); the force plot shows the points. The cam's predicted force meets the table at its points within {:.1e} (relative)",
                 law.table_points.unwrap_or(0),
                 law.table_max_rel_error.unwrap_or(f64::NAN)
+            );
+        }
+        _ => {
+            let _ = write!(
+                h,
+                "<h2 id=\"law\">Force law</h2>\n<p><b>{}</b> (stated as: {})",
+                escape(&law.description),
+                law.form
             );
         }
     }
