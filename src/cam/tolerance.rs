@@ -132,6 +132,12 @@ fn quantile(sorted: &[f64], q: f64) -> f64 {
 
 /// The 95 % force band of builds within `t` (2.5 % and 97.5 % quantiles).
 pub fn force_band(pitch: &PitchCurve, follower: &Follower, t: &TolerancesSpec) -> ForceBand {
+    // A roller cannot shrink below nothing: its tolerance is capped at its radius.
+    let capped = TolerancesSpec {
+        roller_radius_mm: t.roller_radius_mm.min(follower.roller_radius_mm),
+        ..t.clone()
+    };
+    let t = &capped;
     let n = pitch.samples.len();
     let xmax = pitch.samples[n - 1].x_mm;
     // The pitch sample at or just below each station.

@@ -450,7 +450,7 @@ impl Spec {
         validate_machining(&self.machining, &self.part)?;
         validate_checks(&self.checks)?;
         validate_output(&self.output)?;
-        validate_tolerances(&self.tolerances, &self.follower)
+        validate_tolerances(&self.tolerances)
     }
 }
 
@@ -941,7 +941,7 @@ fn validate_checks(c: &ChecksSpec) -> Result<(), SpecError> {
     )
 }
 
-fn validate_tolerances(t: &TolerancesSpec, f: &Follower) -> Result<(), SpecError> {
+fn validate_tolerances(t: &TolerancesSpec) -> Result<(), SpecError> {
     check(
         "tolerances.spring_rate",
         t.spring_rate_percent,
@@ -954,10 +954,11 @@ fn validate_tolerances(t: &TolerancesSpec, f: &Follower) -> Result<(), SpecError
         Range::Closed(0.0, MAX_LENGTH_MM),
         "mm",
     )?;
+    // The band caps it at the roller's radius (a knife edge has no radius to vary).
     check(
         "tolerances.roller_radius",
         t.roller_radius_mm,
-        Range::Closed(0.0, f.roller_radius_mm),
+        Range::Closed(0.0, MAX_LENGTH_MM),
         "mm",
     )?;
     check(
