@@ -151,3 +151,19 @@ fn validate_judges_builds_against_the_band_and_says_where_they_leave_it() {
         assert!(last.to_mm >= last.from_mm && last.worst_n > 0.0);
     }
 }
+
+#[test]
+fn a_knife_edge_keeps_the_default_tolerances_and_gets_a_band() {
+    // The default +-0.01 mm roller tolerance is capped at the radius, not refused.
+    let text = DEFAULT_SPEC_TOML.replace("roller_radius = \"3 mm\"", "roller_radius = \"0 mm\"");
+    let spec = Spec::from_toml(&text).unwrap();
+    assert_eq!(spec.follower.roller_radius_mm, 0.0);
+    let d = design(&spec).unwrap();
+    let band = force_band(&d.pitch_curve, &spec.follower, &spec.tolerances);
+    let s = band
+        .sensitivity
+        .iter()
+        .find(|s| s.tolerance == "roller_radius")
+        .unwrap();
+    assert_eq!(s.loading_half_range_n, 0.0);
+}
