@@ -16,6 +16,7 @@ fn hour_log(profile: Profile) -> camspring::estimate::log::CalibrationLog {
     let spec = Spec::from_toml(DEFAULT_SPEC_TOML).unwrap();
     let law = law_of(&spec).unwrap().law;
     let settings = SimSettings {
+        speed: 1.0,
         profile,
         duration_s: 3600.0,
         rate_hz: 100.0,

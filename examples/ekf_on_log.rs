@@ -16,6 +16,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let spec = Spec::from_toml(DEFAULT_SPEC_TOML)?;
             let law = camspring::design::law_of(&spec)?.law;
             let settings = SimSettings {
+                speed: 1.0,
                 profile: Profile::Sines,
                 duration_s: 300.0,
                 rate_hz: 100.0,

@@ -53,6 +53,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let (mut worst_k2, mut worst_mu) = (0.0f64, 0.0f64);
         for seed in 0..seeds {
             let settings = SimSettings {
+                speed: 1.0,
                 profile,
                 duration_s: seconds,
                 rate_hz: 100.0,

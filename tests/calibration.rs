@@ -5,7 +5,7 @@ mod common;
 
 use camspring::estimate::allan::{allan_variance, white_noise_fit};
 use camspring::estimate::identify::{
-    identify, identify_with_window, Identification, Param, SensorNoise, PARAMS,
+    identify, identify_with_window, FitStatus, Identification, Param, SensorNoise, PARAMS,
 };
 use camspring::estimate::log::{read_log, write_log, CalibrationLog, ColumnMap, LogError};
 use camspring::estimate::noise::noise_model;
@@ -19,6 +19,7 @@ const FMAX_N: f64 = 200.0;
 
 fn run(profile: Profile, seconds: f64, seed: u64, d0: f64) -> (CalibrationLog, Truth) {
     let settings = SimSettings {
+        speed: 1.0,
         profile,
         duration_s: seconds,
         rate_hz: 100.0,
@@ -59,6 +60,9 @@ fn z_scores(id: &Identification, truth: &Truth) -> [Option<f64>; 7] {
 #[test]
 fn identification_recovers_the_truth_within_three_sigma_on_every_profile() {
     let law = common::paper_law();
+    // Every |z| of 105 below 4, and at most two beyond 3 (a normal z exceeds 3 with
+    // probability 0.27 %: two or more of 105 happen 3 % of the time, three or more 0.3 %).
+    let mut all_z = Vec::new();
     for (profile, d0) in [
         (Profile::Sines, 0.0),
         (Profile::Sines, 0.3),
@@ -73,30 +77,40 @@ fn identification_recovers_the_truth_within_three_sigma_on_every_profile() {
             for (k, zk) in z.iter().enumerate() {
                 if let Some(zk) = zk {
                     assert!(
-                        zk.abs() < 3.0,
+                        zk.abs() < 4.0,
                         "{profile:?} d0 {d0} seed {seed}: {} is {zk:.2} sigma off",
                         PARAMS[k]
                     );
+                    all_z.push(zk.abs());
                 }
             }
             let k2 = id.get(Param::K2).value.unwrap();
             let mu = id.get(Param::Mu).value.unwrap();
-            assert!((k2 / law.k2_per_mm - 1.0).abs() < 0.01, "k2 {k2}");
-            assert!((mu / law.mu_n - 1.0).abs() < 0.01, "mu {mu}");
-            // Everything but the inertia is identifiable on every profile; the slow
-            // ramp-hold profile's accelerations are buried in the filtered position noise.
-            if profile == Profile::RampHold {
-                assert_eq!(id.not_identifiable, vec!["m_n_s2_per_mm".to_string()]);
-            } else {
-                assert!(id.not_identifiable.is_empty(), "{:?}", id.not_identifiable);
-            }
+            assert!((k2 / law.k2_per_mm - 1.0).abs() < 0.005, "k2 {k2}");
+            assert!(
+                (mu / law.mu_n - 1.0).abs() < 0.015,
+                "{profile:?} d0 {d0} seed {seed}: mu {mu} against {} (std {:?}, window {} s)",
+                law.mu_n,
+                id.get(Param::Mu).std,
+                id.sg_window_s
+            );
+            // With the window chosen from the data, everything is identifiable on every
+            // profile, the slow ramp-hold's inertia included (a fixed 0.4 s window lost it).
+            assert!(id.not_identifiable.is_empty(), "{:?}", id.not_identifiable);
             assert!(
                 (id.reduced_chi2 - 1.0).abs() < 0.1,
                 "reduced chi2 {}",
                 id.reduced_chi2
             );
+            assert_eq!(id.adequacy.status, FitStatus::Fits, "{:?}", id.adequacy);
         }
     }
+    let beyond_3 = all_z.iter().filter(|z| **z > 3.0).count();
+    assert!(
+        all_z.len() >= 100 && beyond_3 <= 2,
+        "{beyond_3} of {} beyond 3",
+        all_z.len()
+    );
 }
 
 #[test]
@@ -128,6 +142,7 @@ fn reported_standard_deviations_match_the_scatter_over_seeds() {
 #[test]
 fn noise_free_logs_give_the_parameters_without_filter_bias() {
     let settings = SimSettings {
+        speed: 1.0,
         profile: Profile::Sines,
         duration_s: 120.0,
         rate_hz: 100.0,
@@ -479,6 +494,7 @@ fn a_longer_window_identifies_a_heavy_spring_on_a_slow_run() {
     let law = common::paper_law();
     for seed in 0..3 {
         let settings = SimSettings {
+            speed: 1.0,
             profile: Profile::RampHold,
             duration_s: 300.0,
             rate_hz: 100.0,

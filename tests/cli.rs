@@ -297,7 +297,11 @@ fn simulate_noise_and_identify_work_end_to_end() {
             "k2_per_mm" | "mu_n" | "f0_n" => truth["law"][key].as_f64().unwrap(),
             _ => truth["dynamics"][key].as_f64().unwrap(),
         };
-        assert!((v - t).abs() < 3.0 * s, "{key}: {v} +- {s} against {t}");
+        // The inertia on the steps profile can carry a filter-distortion bias of a few of its
+        // (small) standard deviations: the window choice cannot see a bias below the noise
+        // of the shorter windows (docs/CALIBRATION.md).
+        let sigmas = if key == "m_n_s2_per_mm" { 4.0 } else { 3.0 };
+        assert!((v - t).abs() < sigmas * s, "{key}: {v} +- {s} against {t}");
     }
 
     // Noise from a log at rest, then identification with that noise model.
@@ -511,6 +515,9 @@ fn estimate_and_validate_from_the_command_line() {
     );
     assert_eq!(out.status.code(), Some(1));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["consistency"]["consistent"], false);
+    let nis = v["consistency"]["nis_mean"].as_f64().unwrap();
+    assert!((0.35..0.65).contains(&nis), "{nis}");
     assert_eq!(v["pass"], false);
     let k2 = v["criteria"]
         .as_array()
@@ -539,7 +546,9 @@ fn estimate_and_validate_from_the_command_line() {
             "0.02",
         ],
     );
-    assert_eq!(out.status.code(), Some(0));
+    // R is twice the position noise here, so the innovations are about half their predicted
+    // variance: the run is reported as not consistent, exit 1, with the numbers.
+    assert_eq!(out.status.code(), Some(1));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["settings"]["q"][2], 0.25);
     assert_eq!(v["settings"]["q"][3], 0.002);

@@ -27,6 +27,7 @@ fn sim(
     noise: Noise,
 ) -> (CalibrationLog, Truth) {
     let settings = SimSettings {
+        speed: 1.0,
         profile,
         duration_s: seconds,
         rate_hz: 100.0,

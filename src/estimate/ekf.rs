@@ -133,6 +133,9 @@ pub struct EkfSettings {
     pub m_floor: f64,
     /// Smallest stiffness allowed (N/mm).
     pub sigma_floor: f64,
+    /// Smallest generalised damping allowed (N s/mm): a damper whose force falls with speed
+    /// makes the acceleration's dynamics unstable, and the model assumes one that rises.
+    pub d_floor: f64,
     /// An innovation beyond this many of its standard deviations counts as an outlier.
     pub outlier_sigmas: f64,
     /// This many outliers in a row stop the filter as diverged.
@@ -253,6 +256,9 @@ impl Ekf {
         if self.z[idx::SIGMA] < self.settings.sigma_floor {
             self.z[idx::SIGMA] = self.settings.sigma_floor;
         }
+        if self.z[idx::D] < self.settings.d_floor {
+            self.z[idx::D] = self.settings.d_floor;
+        }
     }
 
     /// One sample: predict from the previous sample, update with `y_mm`, check for divergence.
@@ -273,13 +279,16 @@ impl Ekf {
         }
         for (i, name) in STATE_NAMES.iter().enumerate() {
             let variance = self.p[(i, i)];
-            if variance <= 0.0 {
+            // A state held at its initial value (no initial variance, no process noise) stays
+            // at zero variance.
+            let held = self.settings.p0_std[i] == 0.0 && self.settings.q[i] == 0.0;
+            if variance <= 0.0 && !held {
                 return Err(diverged(format!(
                     "the variance of {name} is {variance} (no longer positive definite)"
                 )));
             }
         }
-        if sample.is_multiple_of(64) && self.p.cholesky().is_none() {
+        if sample.is_multiple_of(64) && !self.positive_definite() {
             return Err(diverged(
                 "the covariance is no longer positive definite".into(),
             ));
@@ -301,6 +310,16 @@ impl Ekf {
             self.outliers_in_a_row = 0;
         }
         Ok(info)
+    }
+
+    /// Whether the covariance of the states that are not held is positive definite.
+    fn positive_definite(&self) -> bool {
+        let free: Vec<usize> = (0..8)
+            .filter(|&i| !(self.settings.p0_std[i] == 0.0 && self.settings.q[i] == 0.0))
+            .collect();
+        nalgebra::DMatrix::from_fn(free.len(), free.len(), |a, b| self.p[(free[a], free[b])])
+            .cholesky()
+            .is_some()
     }
 
     /// Standard deviation of each state.
@@ -428,6 +447,9 @@ pub struct EkfRun {
     pub offset_filter: OffsetFilter,
     /// Innovations beyond the outlier threshold.
     pub outliers: usize,
+    /// Mean normalised innovation squared (nu^2 / S) over the second half of the run: about 1
+    /// when the filter's model and its covariance are right.
+    pub nis_mean: f64,
 }
 
 /// Memory of the parallel F0, d0 filter: the offsets it tracks drift over tens of seconds
@@ -503,7 +525,9 @@ pub fn run(
         last: ekf.clone(),
         offset_filter: offsets,
         outliers: 0,
+        nis_mean: f64::NAN,
     };
+    let (mut nis_sum, mut nis_count) = (0.0, 0usize);
     // The first sample initialises; its measurement is used without a prediction.
     ekf.update(position_mm[first]);
     let mut residual_var = 0.0;
@@ -523,6 +547,10 @@ pub fn run(
                 > settings.outlier_sigmas * info.innovation_variance_mm2.sqrt()
             {
                 out.outliers += 1;
+            }
+            if 2 * k >= len {
+                nis_sum += info.innovation_mm * info.innovation_mm / info.innovation_variance_mm2;
+                nis_count += 1;
             }
         }
         let z = ekf.z;
@@ -558,6 +586,7 @@ pub fn run(
     }
     out.last = ekf;
     out.offset_filter = offsets;
+    out.nis_mean = nis_sum / nis_count.max(1) as f64;
     Ok(out)
 }
 
@@ -590,17 +619,31 @@ impl EkfInit {
         };
         let k2 =
             g(Param::K2).unwrap_or((id.k2_quasi_static_per_mm, 0.05 * id.k2_quasi_static_per_mm));
-        let m = g(Param::M).filter(|(v, _)| *v > 0.0);
+        // An inertia or cubic damping that identification does not resolve (standard deviation
+        // above half the value) is held, not estimated: the filter cannot resolve it either,
+        // and a wide prior on it lets the prediction go unstable. The inertia is then held at
+        // identification's value (at least zero: the pipeline's floor applies), d2 at zero.
+        let m = match g(Param::M) {
+            Some((v, s)) if v > 0.0 && s < 0.5 * v => (v, s.max(0.1 * v)),
+            Some((v, _)) => (v.max(0.0), 0.0),
+            None => (0.0, 0.0),
+        };
+        let d2 = match g(Param::D2) {
+            Some((v, s)) if s < 0.5 * v.abs() => (v, s.max(1e-6)),
+            _ => (0.0, 0.0),
+        };
         let d1 = g(Param::D1);
         EkfInit {
             k2_per_mm: (k2.0, k2.1.max(0.01 * k2.0.abs())),
             mu_n: g(Param::Mu).map_or(1.0, |v| v.0),
             f0_n: g(Param::F0).map_or(0.0, |v| v.0),
             d0_n: g(Param::D0).map_or(0.0, |v| v.0),
-            // Without an identified inertia: a small one, free to move.
-            m_n_s2_per_mm: m.map_or((1e-2, 1e-2), |(v, s)| (v, s.max(0.1 * v))),
-            d1_n_s_per_mm: d1.map_or((0.05, 0.05), |(v, s)| (v, s.max(0.1 * v.abs()).max(1e-3))),
-            d2_n_s3_per_mm3: g(Param::D2).map_or((0.0, 1e-3), |(v, s)| (v, s.max(1e-6))),
+            m_n_s2_per_mm: m,
+            // A damper whose identified d1 is negative (noise on a slow run) starts at zero.
+            d1_n_s_per_mm: d1.map_or((0.05, 0.05), |(v, s)| {
+                (v.max(0.0), s.max(0.1 * v.abs()).max(1e-3))
+            }),
+            d2_n_s3_per_mm3: d2,
         }
     }
 
@@ -673,6 +716,7 @@ pub fn default_settings(
         ],
         m_floor: 1e-6,
         sigma_floor: 1e-6,
+        d_floor: 0.0,
         outlier_sigmas: 8.0,
         max_outliers_in_a_row: 50,
     }

@@ -110,7 +110,7 @@ const NOISY_ORDER: [usize; 3] = [M, D2, D1];
 
 /// Smallest share of the information on m that must be signal rather than acceleration noise
 /// for m to count as identifiable.
-pub const MIN_INERTIA_SIGNAL_SHARE: f64 = 0.2;
+pub const MIN_INERTIA_SIGNAL_SHARE: f64 = 0.0;
 
 /// Smallest eigenvalue, relative to the largest, of the unit-diagonal normal matrix for which
 /// every parameter counts as identifiable (a condition number of 1e8).
@@ -211,6 +211,10 @@ pub struct Identification {
     pub sg_window: usize,
     /// Savitzky-Golay window (s).
     pub sg_window_s: f64,
+    /// How the window was chosen, with the windows tried.
+    pub window_choice: WindowChoice,
+    /// Whether the model explains this log: reduced chi-square and residual whiteness.
+    pub adequacy: Adequacy,
 }
 
 impl Identification {
@@ -406,37 +410,15 @@ fn correction(r: &Rows, active: &Active, weights: &[f64]) -> M7 {
     c
 }
 
-/// Share of the information on m (the inverse of its variance, other parameters free) that is
-/// left after removing the acceleration noise: 1 for noise-free accelerations, near or below
-/// zero when the log's accelerations are buried in the filtered position noise.
-fn inertia_signal_share(jtj_corrected: &M7, c: &M7, active: &Active) -> f64 {
-    if !active[M] {
-        return 1.0;
-    }
-    let raw = inverse(&(jtj_corrected + c), active).map_or(0.0, |h| 1.0 / h[(0, 0)]);
-    let signal = inverse(jtj_corrected, active).map_or(0.0, |h| 1.0 / h[(0, 0)]);
-    if raw > 0.0 && signal.is_finite() {
-        signal / raw
-    } else {
-        0.0
-    }
-}
-
 /// Removes what this log cannot identify: parameters in near-null directions of the normal
-/// matrix ([`prune`]); m when less than [`MIN_INERTIA_SIGNAL_SHARE`] of its information is
-/// signal; and, while the noise-corrected normal matrix is not positive definite, the
-/// noise-corrected parameters in the order m, d2, d1 (their information is noise).
+/// matrix ([`prune`]) and, while the noise-corrected normal matrix is not positive definite,
+/// the noise-corrected parameters in the order m, d2, d1 (their information is noise at this
+/// filter window). A parameter whose corrected information is positive is kept, however
+/// noisy: removing a force the log carries would bias the others.
 fn prune_all(p: &mut V7, r: &Rows, active: &mut Active, weights: &[f64]) -> Vec<String> {
     let (jtj, _, _) = normal(p, r, active, weights);
     let c = correction(r, active, weights);
     let mut removed = prune(&(jtj + c), active);
-    let (jtj, _, _) = normal(p, r, active, weights);
-    let c = correction(r, active, weights);
-    let share = inertia_signal_share(&jtj, &c, active);
-    if share < MIN_INERTIA_SIGNAL_SHARE {
-        active[M] = false;
-        removed.push(Param::M.key().to_string());
-    }
     for k in NOISY_ORDER {
         let (jtj, _, _) = normal(p, r, active, weights);
         if scaled(&jtj, active).cholesky().is_some() {
@@ -732,7 +714,7 @@ fn sandwich(
 }
 
 /// Identifies the transmission parameters from a calibration log, with the Savitzky-Golay
-/// window chosen from the sampling rate ([`super::sg::window_for_rate`], about 0.4 s).
+/// window chosen from the data ([`choose_window`]).
 pub fn identify(
     log: &CalibrationLog,
     noise: &SensorNoise,
@@ -741,15 +723,17 @@ pub fn identify(
 }
 
 /// [`identify`] with the Savitzky-Golay window given in seconds (odd number of samples, at
-/// least 9). A longer window lowers the acceleration noise, which slow, quasi-static runs need
-/// for m; it must stay below about a third of the fastest move, or the filter distorts it.
+/// least [`sg::MIN_WINDOW`]), or chosen from the data when `None` ([`choose_window`]).
 pub fn identify_with_window(
     log: &CalibrationLog,
     noise: &SensorNoise,
     window_s: Option<f64>,
 ) -> Result<Identification, IdentifyError> {
     let dt = log.dt_s();
-    if let Some(w) = window_s.filter(|w| w / dt < sg::MIN_WINDOW as f64) {
+    let Some(w) = window_s else {
+        return choose_window(log, noise);
+    };
+    if w / dt < sg::MIN_WINDOW as f64 {
         return Err(IdentifyError::WindowTooShort {
             window_s: w,
             samples: w / dt,
@@ -758,10 +742,221 @@ pub fn identify_with_window(
             min_s: sg::MIN_WINDOW as f64 * dt,
         });
     }
-    let diff = match window_s {
-        Some(w) => Differentiator::new(((w / dt).round().clamp(0.0, 1e6) as usize) | 1),
-        None => Differentiator::for_rate(1.0 / dt),
+    let samples = ((w / dt).round().clamp(0.0, 1e6) as usize) | 1;
+    let mut id = fit(log, noise, &Differentiator::new(samples))?;
+    id.window_choice = WindowChoice {
+        method: WindowMethod::Given,
+        candidates: Vec::new(),
     };
+    Ok(id)
+}
+
+/// Shortest window tried by [`choose_window`] (s).
+pub const SHORTEST_WINDOW_S: f64 = 0.1;
+
+/// Fewest samples in a window tried by [`choose_window`]: the quintic kernels fitted to half
+/// the window's offsets are poorly conditioned on fewer.
+pub const SHORTEST_WINDOW_SAMPLES: usize = 15;
+
+/// Longest window tried by [`choose_window`] (s).
+pub const LONGEST_WINDOW_S: f64 = 6.4;
+
+/// Ratio between neighbouring windows tried by [`choose_window`].
+pub const WINDOW_RATIO: f64 = std::f64::consts::SQRT_2;
+
+/// How many combined standard deviations two windows' estimates may differ by before
+/// [`choose_window`] takes the longer one as distorted.
+pub const BALANCING_SIGMAS: f64 = 2.5;
+
+/// How the Savitzky-Golay window was chosen.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum WindowMethod {
+    /// Given by the user (`--window`).
+    Given,
+    /// Chosen from the data by the balancing principle ([`choose_window`]).
+    Balancing,
+}
+
+/// One window tried by [`choose_window`].
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct WindowCandidate {
+    /// Window (s).
+    pub window_s: f64,
+    /// Window (samples).
+    pub window_samples: usize,
+    /// The fit's k2 (1/mm), when it succeeded.
+    pub k2_per_mm: Option<f64>,
+    /// Reduced chi-square of the fit.
+    pub reduced_chi2: Option<f64>,
+    /// Parameters that this window could not identify.
+    pub not_identifiable: Vec<String>,
+    /// Whether the window identifies as many parameters as the best one (only those are
+    /// compared).
+    pub admissible: bool,
+    /// Why the fit failed, if it did.
+    pub error: Option<String>,
+}
+
+/// The window choice, with every candidate tried.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct WindowChoice {
+    /// How the window was chosen.
+    pub method: WindowMethod,
+    /// Every window tried (empty when given).
+    pub candidates: Vec<WindowCandidate>,
+}
+
+/// The windows (samples, odd) that [`choose_window`] tries for a log of `n` samples every `dt`.
+pub fn candidate_windows(n: usize, dt: f64) -> Vec<usize> {
+    let longest = (LONGEST_WINDOW_S / dt).min(n as f64 / 4.0);
+    let mut out: Vec<usize> = Vec::new();
+    let mut w = (SHORTEST_WINDOW_S / dt).max(SHORTEST_WINDOW_SAMPLES as f64);
+    while w <= longest {
+        let k = (w.round() as usize) | 1;
+        if out.last() != Some(&k) {
+            out.push(k);
+        }
+        w *= WINDOW_RATIO;
+    }
+    out
+}
+
+/// Chooses the Savitzky-Golay window from the data by the balancing principle (Lepski's
+/// method) and returns the identification at that window.
+///
+/// A short window passes much position noise into the velocity and acceleration, so the
+/// estimates are unbiased (the errors-in-variables correction) but noisy; a long one lowers the
+/// noise but distorts the motion, which biases them. The fit is made at windows from
+/// [`SHORTEST_WINDOW_S`] to [`LONGEST_WINDOW_S`] (ratio [`WINDOW_RATIO`]). Windows that
+/// do not fit the log ([`Adequacy`]), or that identify fewer parameters than the best (their
+/// corrected information on m, d2 or d1 is
+/// noise), or at which the velocity noise hides more than three quarters of the samples that move at
+/// the best window, are not compared: leaving out a force the log carries, or most of the
+/// motion, biases the rest. Among the
+/// others, in order of length, the chosen window is the longest whose every estimate agrees
+/// with the estimate of every shorter window within [`BALANCING_SIGMAS`] standard deviations
+/// of their difference, taken as sqrt(s_short^2 - s_long^2) (at least half of s_short): the
+/// longer window's estimate is the more precise, and the difference of two estimates of the
+/// same quantity has about that spread.
+pub fn choose_window(
+    log: &CalibrationLog,
+    noise: &SensorNoise,
+) -> Result<Identification, IdentifyError> {
+    let dt = log.dt_s();
+    let windows = candidate_windows(log.len(), dt);
+    if windows.is_empty() {
+        // Too short a log for the shortest window: the fixed-window fit says why.
+        return fit(log, noise, &Differentiator::new(sg::MIN_WINDOW));
+    }
+    let fits: Vec<Result<Identification, IdentifyError>> = windows
+        .iter()
+        .map(|&w| fit(log, noise, &Differentiator::new(w)))
+        .collect();
+    let fewest_missing = fits
+        .iter()
+        .filter_map(|f| f.as_ref().ok())
+        .map(|id| id.not_identifiable.len())
+        .min();
+    let Some(fewest_missing) = fewest_missing else {
+        // Every window failed: report the failure at the shortest one.
+        return fits
+            .into_iter()
+            .next()
+            .unwrap_or_else(|| fit(log, noise, &Differentiator::new(sg::MIN_WINDOW)));
+    };
+    // The most samples that move at a window whose fit explains the log (a distorted fit at a
+    // long window can count more).
+    let most_moving = fits
+        .iter()
+        .filter_map(|f| f.as_ref().ok())
+        .filter(|id| id.adequacy.status == FitStatus::Fits)
+        .map(|id| id.dynamic_samples)
+        .max()
+        .unwrap_or(0);
+    let candidate = |id: &Identification| {
+        id.not_identifiable.len() == fewest_missing && 4 * id.dynamic_samples >= most_moving
+    };
+    // Windows whose fit does not explain the log (too short for the kernels' conditioning, or
+    // long enough to distort the motion) are left out, unless every window is such.
+    let any_fits = fits
+        .iter()
+        .filter_map(|f| f.as_ref().ok())
+        .any(|id| candidate(id) && id.adequacy.status == FitStatus::Fits);
+    let admissible: Vec<usize> = (0..fits.len())
+        .filter(|&i| {
+            fits[i].as_ref().is_ok_and(|id| {
+                candidate(id) && (!any_fits || id.adequacy.status == FitStatus::Fits)
+            })
+        })
+        .collect();
+    if admissible.is_empty() {
+        return Err(IdentifyError::NoConvergence(
+            "no window was admissible".into(),
+        ));
+    }
+    let mut chosen = admissible[0];
+    'longer: for (j, &long) in admissible.iter().enumerate().skip(1) {
+        let Ok(b) = &fits[long] else { continue };
+        for &short in &admissible[..j] {
+            let Ok(a) = &fits[short] else { continue };
+            if !agree(a, b) {
+                break 'longer;
+            }
+        }
+        chosen = long;
+    }
+    let candidates = windows
+        .iter()
+        .zip(&fits)
+        .enumerate()
+        .map(|(i, (&w, f))| WindowCandidate {
+            window_s: w as f64 * dt,
+            window_samples: w,
+            k2_per_mm: f.as_ref().ok().and_then(|id| id.get(Param::K2).value),
+            reduced_chi2: f.as_ref().ok().map(|id| id.reduced_chi2),
+            not_identifiable: f
+                .as_ref()
+                .map(|id| id.not_identifiable.clone())
+                .unwrap_or_default(),
+            admissible: admissible.contains(&i),
+            error: f.as_ref().err().map(|e| e.to_string()),
+        })
+        .collect();
+    let mut id = fits
+        .into_iter()
+        .nth(chosen)
+        .and_then(Result::ok)
+        .ok_or_else(|| IdentifyError::NoConvergence("no window was chosen".into()))?;
+    id.window_choice = WindowChoice {
+        method: WindowMethod::Balancing,
+        candidates,
+    };
+    Ok(id)
+}
+
+/// Whether every parameter that both fits identify agrees within [`BALANCING_SIGMAS`]
+/// standard deviations of the difference (`short` at the shorter window).
+fn agree(short: &Identification, long: &Identification) -> bool {
+    Param::ALL.into_iter().all(|p| {
+        let (a, b) = (short.get(p), long.get(p));
+        match (a.value, a.std, b.value, b.std) {
+            (Some(va), Some(sa), Some(vb), Some(sb)) => {
+                let spread = (sa * sa - sb * sb).max(0.25 * sa * sa).sqrt();
+                (va - vb).abs() <= BALANCING_SIGMAS * spread
+            }
+            _ => true,
+        }
+    })
+}
+
+/// The identification at one Savitzky-Golay window.
+fn fit(
+    log: &CalibrationLog,
+    noise: &SensorNoise,
+    diff: &Differentiator,
+) -> Result<Identification, IdentifyError> {
+    let dt = log.dt_s();
     let h = diff.half;
     if log.len() < 4 * diff.window() {
         return Err(IdentifyError::TooShort {
@@ -846,43 +1041,66 @@ pub fn identify_with_window(
     }
     let (p1, _) = gauss_newton(best.1, &qs_rows, &mut spring_only, 100)?;
 
-    // Stage 2: the paper's WLS with k2 fixed, on the samples whose friction sign is known.
-    let moving: Vec<usize> = (0..n).filter(|&i| motion[i].abs() > band).collect();
-    let needed = 20 * 7;
-    if moving.len() < needed {
-        return Err(IdentifyError::TooLittleMotion {
-            found: moving.len(),
-            needed,
-            band_mm_s: band,
-        });
-    }
-    let rows = all.subset(&moving, true);
-    let mut active = [true, true, true, true, true, true, false];
-    let mut p = p1;
-    let mut not_identifiable = Vec::new();
-    for _ in 0..2 {
+    // Stages 2 and 3 on the samples moving faster than `band`.
+    let dynamic_fit = |band: f64| -> Result<_, IdentifyError> {
+        // Stage 2: the paper's WLS with k2 fixed, on the samples whose friction sign is known.
+        let moving: Vec<usize> = (0..n).filter(|&i| motion[i].abs() > band).collect();
+        let needed = 20 * 7;
+        if moving.len() < needed {
+            return Err(IdentifyError::TooLittleMotion {
+                found: moving.len(),
+                needed,
+                band_mm_s: band,
+            });
+        }
+        let rows = all.subset(&moving, true);
+        let mut active = [true, true, true, true, true, true, false];
+        let mut p = p1;
+        let mut not_identifiable = Vec::new();
+        for _ in 0..2 {
+            let weights = weights_at(&p, &rows);
+            not_identifiable.extend(prune_all(&mut p, &rows, &mut active, &weights));
+            // The WLS solution is one Gauss-Newton step from any start for linear parameters.
+            let (jtj, jtr, _) = normal(&p, &rows, &active, &weights);
+            let dp = solve(&jtj, &jtr, &active)
+                .ok_or_else(|| IdentifyError::NoConvergence("singular WLS normal matrix".into()))?;
+            p += dp;
+        }
         let weights = weights_at(&p, &rows);
-        not_identifiable.extend(prune_all(&mut p, &rows, &mut active, &weights));
-        // The WLS solution is one Gauss-Newton step from any start for linear parameters.
-        let (jtj, jtr, _) = normal(&p, &rows, &active, &weights);
-        let dp = solve(&jtj, &jtr, &active)
-            .ok_or_else(|| IdentifyError::NoConvergence("singular WLS normal matrix".into()))?;
-        p += dp;
-    }
-    let weights = weights_at(&p, &rows);
-    let (jtj2, _, _) = normal(&p, &rows, &active, &weights);
-    let paper = inverse(&jtj2, &active).unwrap_or_else(M7::zeros);
-    let idx2: Vec<usize> = (0..6).filter(|&k| active[k]).collect();
-    let paper_covariance_k2_fixed = idx2
-        .iter()
-        .map(|&a| idx2.iter().map(|&b| paper[(a, b)]).collect())
-        .collect();
+        let (jtj2, _, _) = normal(&p, &rows, &active, &weights);
+        let paper = inverse(&jtj2, &active).unwrap_or_else(M7::zeros);
+        let idx2: Vec<usize> = (0..6).filter(|&k| active[k]).collect();
+        let paper_covariance_k2_fixed = idx2
+            .iter()
+            .map(|&a| idx2.iter().map(|&b| paper[(a, b)]).collect())
+            .collect();
 
-    // Stage 3: joint refinement with k2.
-    active[K2] = true;
-    not_identifiable.extend(prune_all(&mut p, &rows, &mut active, &weights));
-    let (p, dropped) = gauss_newton(p, &rows, &mut active, 100)?;
-    not_identifiable.extend(dropped);
+        // Stage 3: joint refinement with k2.
+        active[K2] = true;
+        not_identifiable.extend(prune_all(&mut p, &rows, &mut active, &weights));
+        let (p, dropped) = gauss_newton(p, &rows, &mut active, 100)?;
+        not_identifiable.extend(dropped);
+        Ok((rows, p, active, not_identifiable, paper_covariance_k2_fixed))
+    };
+    let (mut rows, mut p, mut active, mut not_identifiable, mut paper_covariance_k2_fixed) =
+        dynamic_fit(band)?;
+    // A wrong friction sign costs a residual of 2 d0. Samples within a few velocity-noise
+    // standard deviations of zero can have it; with strong Coulomb friction the band is widened
+    // until the expected share of such rows, times (2 d0)^2, is below 1 % of the row variance.
+    if active[D0] {
+        let d0 = p[D0].abs();
+        let weights = weights_at(&p, &rows);
+        let mean_variance = weights.iter().map(|w| 1.0 / w).sum::<f64>() / weights.len() as f64;
+        let sigma_motion = var_motion.sqrt();
+        let mut z = 3.0;
+        while z < 8.0 && 4.0 * d0 * d0 * normal_tail(z) > 0.01 * mean_variance {
+            z += 0.25;
+        }
+        let wider = (z * sigma_motion).max(1e-3 * vmax);
+        if wider > band {
+            (rows, p, active, not_identifiable, paper_covariance_k2_fixed) = dynamic_fit(wider)?;
+        }
+    }
     let weights = weights_at(&p, &rows);
     let (jtj, _, _) = normal(&p, &rows, &active, &weights);
     let m = rows.f.len();
@@ -903,6 +1121,13 @@ pub fn identify_with_window(
         .sum::<f64>()
         / m as f64)
         .sqrt();
+    let residuals: Vec<f64> = (0..m)
+        .map(|i| (rows.f[i] - model(&p, &rows, i).0) * weights[i].sqrt())
+        .collect();
+    let adequacy = Adequacy::new(
+        chi2 / dof,
+        whiteness(&residuals, &rows.index, diff.window()),
+    );
     let parameters = Estimates(std::array::from_fn(|k| {
         if active[k] {
             Estimate {
@@ -938,5 +1163,191 @@ pub fn identify_with_window(
         quasi_static_samples: qs_rows.f.len(),
         sg_window: diff.window(),
         sg_window_s: diff.window() as f64 * dt,
+        window_choice: WindowChoice {
+            method: WindowMethod::Given,
+            candidates: Vec::new(),
+        },
+        adequacy,
+    })
+}
+
+/// Two-sided tail probability P(|Z| > z) of a standard normal Z.
+fn normal_tail(z: f64) -> f64 {
+    use statrs::distribution::{ContinuousCDF, Normal};
+    Normal::standard().sf(z) * 2.0
+}
+
+/// Largest reduced chi-square that counts as the model explaining the log: the noise model's
+/// weights make it about 1 when the dynamic model and the noise model are right.
+pub const MAX_REDUCED_CHI2: f64 = 1.5;
+
+/// Smallest reduced chi-square that counts as the model explaining the log (below it the
+/// noise model is larger than the log's noise).
+pub const MIN_REDUCED_CHI2: f64 = 0.5;
+
+/// Lags (in filter windows) of the whiteness test.
+pub const WHITENESS_LAGS: usize = 20;
+
+/// Significance level of the whiteness test.
+pub const WHITENESS_LEVEL: f64 = 1e-3;
+
+/// The residual whiteness test: the standardized residuals' autocorrelation at lags of whole
+/// filter windows, where the noise model says they are independent.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Whiteness {
+    /// Ljung-Box-type statistic: the sum over the tested lags of rho^2 / var(rho).
+    pub statistic: f64,
+    /// Degrees of freedom (lags tested).
+    pub lags: usize,
+    /// Spacing of the tested lags (samples): one filter window.
+    pub lag_spacing_samples: usize,
+    /// Probability of a statistic this large for residuals that are independent beyond one
+    /// window.
+    pub p_value: f64,
+}
+
+/// Whether the fitted model explains the log.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Adequacy {
+    /// Reduced chi-square with the noise model's weights.
+    pub reduced_chi2: f64,
+    /// The residual whiteness test (None: too few samples).
+    pub whiteness: Option<Whiteness>,
+    /// `fits`, or `does-not-fit` with the reasons and the likely cause.
+    pub status: FitStatus,
+    /// Why the model does not fit, and the likely cause (empty when it fits).
+    pub reasons: Vec<String>,
+}
+
+/// The adequacy verdict.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FitStatus {
+    /// Reduced chi-square near 1 and white residuals.
+    Fits,
+    /// The model does not explain this log.
+    DoesNotFit,
+}
+
+impl Adequacy {
+    /// Judges a fit by its reduced chi-square and whiteness test.
+    pub fn new(reduced_chi2: f64, whiteness: Option<Whiteness>) -> Adequacy {
+        let mut reasons = Vec::new();
+        let coloured = whiteness.is_some_and(|w| w.p_value < WHITENESS_LEVEL);
+        if reduced_chi2 > MAX_REDUCED_CHI2 || !reduced_chi2.is_finite() {
+            reasons.push(format!(
+                "reduced chi-square {reduced_chi2:.2} is above {MAX_REDUCED_CHI2}: the residuals are larger than \
+                 the noise model allows; {}",
+                if coloured {
+                    "they are also correlated over time, so the likely cause is a force the model lacks \
+                     (friction that is not Coulomb, hysteresis, a law that is not exponential, a slipping \
+                     encoder) or a filter window too long for the motion"
+                } else {
+                    "they are white, so the likely cause is a noise model smaller than the sensors' noise: \
+                     measure it with `camspring noise` on a log at rest and pass --noise"
+                }
+            ));
+        } else if reduced_chi2 < MIN_REDUCED_CHI2 {
+            reasons.push(format!(
+                "reduced chi-square {reduced_chi2:.2} is below {MIN_REDUCED_CHI2}: the noise model is larger \
+                 than this log's noise, so the standard deviations are too wide; measure it with \
+                 `camspring noise` on a log at rest and pass --noise"
+            ));
+        }
+        if let Some(w) = whiteness.filter(|_| coloured) {
+            reasons.push(format!(
+                "the residuals are correlated beyond one filter window (whiteness statistic {:.1} over \
+                 {} lags, p = {:.1e} < {WHITENESS_LEVEL}): the model leaves a slow force unexplained \
+                 (friction that is not Coulomb, hysteresis, drift, or a filter window too long for the \
+                 motion)",
+                w.statistic, w.lags, w.p_value
+            ));
+        }
+        Adequacy {
+            reduced_chi2,
+            whiteness,
+            status: if reasons.is_empty() {
+                FitStatus::Fits
+            } else {
+                FitStatus::DoesNotFit
+            },
+            reasons,
+        }
+    }
+
+    /// Why the model does not fit this log, or None when it does.
+    pub fn problem(&self) -> Option<String> {
+        (self.status == FitStatus::DoesNotFit).then(|| self.reasons.join("; "))
+    }
+}
+
+/// The whiteness test of standardized residuals `u` at sample indices `index` (increasing),
+/// with the filter window `window` (samples).
+///
+/// Neighbouring residuals share the filtered position noise, so they are correlated up to one
+/// window apart even when the model is right; beyond that the noise model makes them
+/// independent. The test takes the autocorrelation rho at lags of 1, 2, ... [`WHITENESS_LAGS`]
+/// windows. For a series that is independent beyond q = window - 1 samples, Bartlett's formula
+/// gives var(rho(L)) = (1 + 2 sum_{j=1..q} rho(j)^2) / n_L for L > q, and estimates at lags
+/// more than q apart are uncorrelated; so the sum of rho^2 / var(rho) is chi-square with one
+/// degree of freedom per lag.
+pub fn whiteness(u: &[f64], index: &[usize], window: usize) -> Option<Whiteness> {
+    let n = u.len();
+    let span = index.last().map_or(0, |&l| l + 1);
+    if n < 10 * window || window == 0 {
+        return None;
+    }
+    let mut dense = vec![f64::NAN; span];
+    for (&i, &v) in index.iter().zip(u) {
+        dense[i] = v;
+    }
+    let variance = u.iter().map(|v| v * v).sum::<f64>() / n as f64;
+    if variance <= 0.0 || !variance.is_finite() {
+        return None;
+    }
+    // The near lags (up to one window) are estimated from a prefix of the rows, which bounds
+    // the work at about window * 1e5 products however long the log.
+    let rho_over = |lag: usize, rows: usize| -> Option<(f64, usize)> {
+        let (mut sum, mut count) = (0.0, 0usize);
+        for (&i, &a) in index.iter().zip(u).take(rows) {
+            if let Some(&b) = dense.get(i + lag) {
+                if b.is_finite() {
+                    sum += a * b;
+                    count += 1;
+                }
+            }
+        }
+        (count > 0).then(|| (sum / count as f64 / variance, count))
+    };
+    let rho = |lag: usize| rho_over(lag, n);
+    let q = window - 1;
+    let near: f64 = (1..=q)
+        .filter_map(|lag| rho_over(lag, 100_000))
+        .map(|(r, _)| r * r)
+        .sum();
+    let mut statistic = 0.0;
+    let mut lags = 0;
+    for k in 1..=WHITENESS_LAGS {
+        let Some((r, count)) = rho(k * window) else {
+            break;
+        };
+        if count < 5 * window {
+            break;
+        }
+        statistic += r * r * count as f64 / (1.0 + 2.0 * near);
+        lags += 1;
+    }
+    if lags == 0 {
+        return None;
+    }
+    use statrs::distribution::{ChiSquared, ContinuousCDF};
+    let p_value = ChiSquared::new(lags as f64)
+        .map(|d| d.sf(statistic))
+        .unwrap_or(f64::NAN);
+    Some(Whiteness {
+        statistic,
+        lags,
+        lag_spacing_samples: window,
+        p_value,
     })
 }

@@ -7,6 +7,7 @@ use super::identify::{identify_with_window, Identification, IdentifyError, Senso
 use super::log::CalibrationLog;
 use super::sg;
 use crate::model::ExpLaw;
+use serde::Serialize;
 
 /// Where the filter's initial state comes from.
 #[derive(Debug, Clone, PartialEq)]
@@ -125,6 +126,10 @@ pub struct EstimateRun {
     pub settings: EkfSettings,
     /// The identification, when the init came from it.
     pub identification: Option<Identification>,
+    /// How a diverged first run was recovered, if it was.
+    pub recovery: Option<String>,
+    /// Whether the run's estimates and standard deviations can be trusted.
+    pub consistency: Consistency,
 }
 
 /// Why the estimation failed.
@@ -139,31 +144,59 @@ pub enum EstimateError {
 }
 
 /// Removes Coulomb friction `d0_n` from the force: it steps the force at every reversal, and
-/// its derivative is not in the filter's model. The sign is that of the motion velocity,
-/// held while the velocity is within three noise standard deviations of zero.
-fn without_coulomb(log: &CalibrationLog, d0_n: f64, noise: &SensorNoise) -> Vec<f64> {
+/// its derivative is not in the filter's model.
+///
+/// The sign is that of the motion velocity (Savitzky-Golay over `window` samples, zero phase).
+/// Where the velocity stays within three of its noise standard deviations of zero for longer
+/// than half a window, the spring is at rest and the model's friction is zero. A shorter stay
+/// is a reversal, and the sign follows the velocity's through zero, so the friction's step
+/// falls within a few samples of the true one. What is left near each reversal, a force error
+/// of 2 d0 over those samples, reaches the filter through the force rate: with strong friction
+/// (d0 many times the force noise) the filter's inertia and k2 suffer, and
+/// [`Consistency`] says so.
+fn without_coulomb(
+    log: &CalibrationLog,
+    d0_n: f64,
+    noise: &SensorNoise,
+    window: usize,
+) -> Vec<f64> {
     let mut force = log.force_n.clone();
     if d0_n == 0.0 {
         return force;
     }
     let dt = log.dt_s();
-    let diff = sg::Differentiator::for_rate(1.0 / dt);
+    let diff = sg::Differentiator::new(window);
     let v = diff.apply(&log.position_mm, dt, sg::MOTION_VELOCITY);
     let band = 3.0
         * diff
             .noise_variance(sg::MOTION_VELOCITY, noise.position_variance_mm2, dt)
             .sqrt();
-    let mut sign = 0.0;
-    for (i, f) in force.iter_mut().enumerate() {
-        let vi = v.get(i.saturating_sub(diff.half).min(v.len().saturating_sub(1)));
-        if let Some(&vi) = vi {
-            if vi > band {
-                sign = 1.0;
-            } else if vi < -band {
-                sign = -1.0;
-            }
+    let n = force.len();
+    // The sign at every sample (edges: the nearest filtered velocity).
+    let velocity = |i: usize| v[i.saturating_sub(diff.half).min(v.len().saturating_sub(1))];
+    let mut sign = vec![0.0; n];
+    if v.is_empty() {
+        return force;
+    }
+    let mut i = 0;
+    while i < n {
+        let vi = velocity(i);
+        if vi.abs() > band {
+            sign[i] = vi.signum();
+            i += 1;
+            continue;
         }
-        *f -= d0_n * sign;
+        let start = i;
+        while i < n && velocity(i).abs() <= band {
+            i += 1;
+        }
+        let at_rest = i - start > diff.half;
+        for (k, s) in sign.iter_mut().enumerate().take(i).skip(start) {
+            *s = if at_rest { 0.0 } else { velocity(k).signum() };
+        }
+    }
+    for (f, s) in force.iter_mut().zip(&sign) {
+        *f -= d0_n * s;
     }
     force
 }
@@ -174,7 +207,7 @@ pub fn estimate(
     opts: &EstimateOptions,
     progress: impl FnMut(usize, usize),
 ) -> Result<EstimateRun, EstimateError> {
-    let (init, identification, stroke) = match &opts.init {
+    let (mut init, identification, stroke) = match &opts.init {
         EstimateInit::Identify => {
             let id = identify_with_window(log, &opts.noise, opts.window_s)?;
             let stroke = log.position_mm.iter().fold(0.0_f64, |m, &x| m.max(x.abs()));
@@ -183,13 +216,27 @@ pub fn estimate(
         EstimateInit::Law { law, xmax_mm } => (EkfInit::from_law(law), None, *xmax_mm),
     };
     let dt = log.dt_s();
+    // The inertia's floor keeps the prediction stable: RK4 needs D dt / M and
+    // sqrt(sigma / M) dt of order 1 or less, and an inertia below that cannot be resolved at
+    // this sampling rate anyway. A held inertia (not resolved by identification) starts there.
+    let sigma_top =
+        init.k2_per_mm.0.abs() * init.mu_n.abs() * (init.k2_per_mm.0.abs() * stroke).exp();
+    let m_floor = (init.d1_n_s_per_mm.0.abs() * dt)
+        .max(sigma_top * dt * dt)
+        .max(1e-6);
+    init.m_n_s2_per_mm.0 = init.m_n_s2_per_mm.0.max(m_floor);
+    // Identification's window also gives the velocity whose sign is the friction's.
+    let window = identification
+        .as_ref()
+        .map_or(sg::window_for_rate(1.0 / dt), |id| id.sg_window);
     let mut settings =
         ekf::default_settings(&init, &opts.noise, dt, opts.discretization, opts.force_rate);
-    let force = without_coulomb(log, init.d0_n, &opts.noise);
+    let force = without_coulomb(log, init.d0_n, &opts.noise, window);
     let first = ekf::force_rate_first_sample(dt, opts.force_rate);
     let x0 = log.position_mm.get(first).copied().unwrap_or(0.0);
     let (z0, sigma_std) = ekf::initial_state(&init, x0, stroke);
     settings.p0_std[ekf::idx::SIGMA] = sigma_std;
+    settings.m_floor = settings.m_floor.max(m_floor);
     if let Some(k) = opts.outlier_sigmas {
         settings.outlier_sigmas = k;
     }
@@ -202,29 +249,189 @@ pub fn estimate(
     if let Some(r) = opts.r_position_mm2 {
         settings.r_position_mm2 = r.max(1e-12);
     }
-    let mut run = ekf::run(
-        EkfInput {
-            t_s: &log.t_s,
-            force_n: &force,
-            position_mm: &log.position_mm,
-            force_rate: opts.force_rate,
-            z0,
-            settings,
-            offsets0: [init.f0_n, init.d0_n],
-            offset_memory_s: ekf::OFFSET_MEMORY_S,
-        },
-        progress,
-    )?;
+    let input = |settings: EkfSettings| EkfInput {
+        t_s: &log.t_s,
+        force_n: &force,
+        position_mm: &log.position_mm,
+        force_rate: opts.force_rate,
+        z0,
+        settings,
+        offsets0: [init.f0_n, init.d0_n],
+        offset_memory_s: ekf::OFFSET_MEMORY_S,
+    };
+    let mut progress = progress;
+    let mut recovery = None;
+    let mut run = match ekf::run(input(settings), &mut progress) {
+        Ok(run) => run,
+        Err(EkfError::Diverged { sample, t_s, what }) => {
+            // A poor start: widen what the filter may learn (ten times the initial standard
+            // deviations of the impedance states and constants, ten times the process noise
+            // of the acceleration) and run again from the start, once.
+            let mut wide = settings;
+            for i in [
+                ekf::idx::SIGMA,
+                ekf::idx::D,
+                ekf::idx::M,
+                ekf::idx::K2,
+                ekf::idx::D2,
+            ] {
+                wide.p0_std[i] *= 10.0;
+            }
+            wide.q[ekf::idx::XDD] *= 10.0;
+            let run = match ekf::run(input(wide), &mut progress) {
+                Ok(run) => run,
+                Err(second) => {
+                    // Report the first divergence: the log's fault is most likely there.
+                    return Err(EkfError::Diverged {
+                        sample,
+                        t_s,
+                        what: format!(
+                            "{what}; a second run with ten times the initial uncertainty failed \
+                             too ({second})"
+                        ),
+                    }
+                    .into());
+                }
+            };
+            recovery = Some(format!(
+                "the filter diverged at sample {sample} (t = {t_s:.3} s: {what}); it was run again \
+                 from the start with ten times the initial standard deviations of sigma, D, M, k2 \
+                 and d2 and ten times the process noise of the acceleration, and converged"
+            ));
+            settings = wide;
+            run
+        }
+        Err(e) => return Err(e.into()),
+    };
     // The parallel filter saw the force with the initial d0 taken out: add it back.
     for o in run.offsets.iter_mut() {
         o[1] += init.d0_n;
     }
     run.offset_filter.theta[1] += init.d0_n;
+    let consistency = Consistency::new(&run, identification.as_ref());
     Ok(EstimateRun {
         run,
         settings,
         identification,
+        recovery,
+        consistency,
     })
+}
+
+/// How far the filter's constants may lie from identification's, in standard deviations of
+/// their difference, before the run counts as inconsistent.
+pub const AGREEMENT_SIGMAS: f64 = 3.0;
+
+/// The range of the mean normalised innovation squared inside which the filter counts as
+/// consistent.
+pub const NIS_RANGE: (f64, f64) = (0.7, 1.5);
+
+/// One constant that the filter and identification both estimate.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Agreement {
+    /// The state's unit-bearing name.
+    pub state: &'static str,
+    /// The filter's final value and standard deviation.
+    pub filter: f64,
+    /// Its standard deviation.
+    pub filter_std: f64,
+    /// Identification's value.
+    pub identified: f64,
+    /// Its standard deviation.
+    pub identified_std: f64,
+    /// |filter - identified| / sqrt(filter_std^2 + identified_std^2).
+    pub sigmas: f64,
+}
+
+/// Whether the filter's estimates and standard deviations can be trusted on this log.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Consistency {
+    /// Mean normalised innovation squared over the second half (about 1 when consistent).
+    pub nis_mean: f64,
+    /// The constants compared with identification's (empty without identification).
+    pub agreement: Vec<Agreement>,
+    /// True when the NIS is inside [`NIS_RANGE`] and every constant agrees within
+    /// [`AGREEMENT_SIGMAS`].
+    pub consistent: bool,
+    /// What is wrong, with the likely cause (empty when consistent).
+    pub reasons: Vec<String>,
+}
+
+impl Consistency {
+    /// Checks a run: its innovations against their predicted variance, and its final M, k2
+    /// and d2 against identification's estimates of the same log. The two see the same data,
+    /// so their difference has less spread than the root sum of squares used here: a
+    /// disagreement beyond it is a real one.
+    pub fn new(run: &EkfRun, id: Option<&Identification>) -> Consistency {
+        use super::identify::Param;
+        let mut reasons = Vec::new();
+        let nis = run.nis_mean;
+        if !(NIS_RANGE.0..=NIS_RANGE.1).contains(&nis) {
+            reasons.push(format!(
+                "the position innovations are {nis:.2} times their predicted variance (expected {} to {}): \
+                 the filter's model does not match this log, so its standard deviations are not to be \
+                 trusted",
+                NIS_RANGE.0, NIS_RANGE.1
+            ));
+        }
+        let mut agreement = Vec::new();
+        if let Some(id) = id {
+            let z = run.last.z;
+            let sd = run.last.std();
+            for (state, p) in [
+                (ekf::idx::M, Param::M),
+                (ekf::idx::K2, Param::K2),
+                (ekf::idx::D2, Param::D2),
+            ] {
+                let e = id.get(p);
+                let (Some(v), Some(s)) = (e.value, e.std) else {
+                    continue;
+                };
+                let spread = (s * s + sd[state] * sd[state]).sqrt();
+                let sigmas = (z[state] - v).abs() / spread.max(1e-300);
+                agreement.push(Agreement {
+                    state: ekf::STATE_NAMES[state],
+                    filter: z[state],
+                    filter_std: sd[state],
+                    identified: v,
+                    identified_std: s,
+                    sigmas,
+                });
+            }
+            let off: Vec<String> = agreement
+                .iter()
+                .filter(|a| a.sigmas > AGREEMENT_SIGMAS)
+                .map(|a| format!("{} ({:.1} sigma)", a.state, a.sigmas))
+                .collect();
+            if !off.is_empty() {
+                let d0 = id.get(Param::D0).value.unwrap_or(0.0).abs();
+                let noise = id.residual_rms_n;
+                let cause = if d0 > 5.0 * noise {
+                    format!(
+                        "the likely cause is Coulomb friction: d0 = {d0:.2} N is {:.0} times the force \
+                         residual, and its step at each reversal, known only to a few samples, enters the \
+                         filter through the force rate",
+                        d0 / noise.max(1e-12)
+                    )
+                } else {
+                    "the likely cause is an inertia or damping force too small for the filter to \
+                     resolve at this noise, or a model the log does not follow"
+                        .to_string()
+                };
+                reasons.push(format!(
+                    "the filter's {} disagree with identification of the same log beyond {AGREEMENT_SIGMAS} \
+                     standard deviations; {cause}; use identify's estimates",
+                    off.join(", ")
+                ));
+            }
+        }
+        Consistency {
+            nis_mean: nis,
+            agreement,
+            consistent: reasons.is_empty(),
+            reasons,
+        }
+    }
 }
 
 #[cfg(test)]

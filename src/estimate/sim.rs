@@ -97,6 +97,9 @@ pub struct SimSettings {
     pub rate_hz: f64,
     /// Random seed.
     pub seed: u64,
+    /// Speed of the profile relative to its nominal one: 0.5 runs every move half as fast
+    /// (for heavy dampers, whose force must keep rising with speed, and for slow runs).
+    pub speed: f64,
     /// Dynamics.
     pub dynamics: Dynamics,
     /// Noise.
@@ -112,6 +115,7 @@ impl Default for SimSettings {
             duration_s: 300.0,
             rate_hz: 100.0,
             seed: 0,
+            speed: 1.0,
             dynamics: Dynamics::default(),
             noise: Noise::default(),
         }
@@ -147,7 +151,7 @@ pub enum SimError {
     /// Produced by [`simulate`] when the profile needs a pushing force or too much force.
     #[error(
         "the {profile:?} profile needs a rod force of {force_n:.3} N at t = {t_s:.3} s, outside 0 ... {limit_n:.1} N \
-         (the wire only pulls); lower the damping or use a slower profile"
+         (the wire only pulls); lower the damping or run the profile slower (--speed)"
     )]
     ForceOutOfRange {
         /// Profile.
@@ -166,6 +170,12 @@ pub enum SimError {
 
 /// The most samples one simulated run may have (duration times rate).
 pub const MAX_SAMPLES: f64 = 2e7;
+
+/// Slowest profile speed factor ([`SimSettings::speed`]).
+pub const MIN_SPEED: f64 = 0.01;
+
+/// Fastest profile speed factor ([`SimSettings::speed`]).
+pub const MAX_SPEED: f64 = 10.0;
 
 /// Duration of one move of the steps profile: a few filter windows, so that the smoothing
 /// differentiator follows it.
@@ -218,6 +228,12 @@ pub fn simulate(
             s.duration_s,
             s.rate_hz,
             s.duration_s * s.rate_hz
+        )));
+    }
+    if !(s.speed.is_finite() && (MIN_SPEED..=MAX_SPEED).contains(&s.speed)) {
+        return Err(SimError::Settings(format!(
+            "--speed {}: expected a factor from {MIN_SPEED} to {MAX_SPEED} (1 is the profile's nominal speed)",
+            s.speed
         )));
     }
     let d = &s.dynamics;
@@ -274,7 +290,9 @@ pub fn simulate(
     };
     let limit = fmax_n;
     for i in 0..n {
-        let t = i as f64 * dt;
+        // The profile runs on a scaled clock: its velocity scales with `speed`, its
+        // acceleration with its square.
+        let t = i as f64 * dt * s.speed;
         let (x, xd, xdd) = match s.profile {
             Profile::Sines => {
                 let (w1, w2) = (std::f64::consts::TAU * 0.15, std::f64::consts::TAU * 0.41);
@@ -289,14 +307,19 @@ pub fn simulate(
             Profile::Steps => moves(&step_levels, STEP_RAMP_S, 1.5, t),
             Profile::Static => (0.5 * xmax_mm, 0.0, 0.0),
         };
+        let (xd, xdd) = (xd * s.speed, xdd * s.speed * s.speed);
+        let t = i as f64 * dt;
         if d.d2_n_s3_per_mm3 < 0.0 && 3.0 * d.d2_n_s3_per_mm3.abs() * xd * xd > d.d1_n_s_per_mm {
             return Err(SimError::Settings(format!(
                 "at t = {t:.3} s the {:?} profile moves at {:.2} mm/s, where the damper force \
                  d1 xd + d2 xd^3 would fall with speed (above sqrt(d1 / (3 |d2|)) = {:.2} mm/s); \
-                 use a smaller |d2| or a larger d1",
+                 run the profile slower (--speed {:.2} or less), or use a smaller |d2| or a larger d1",
                 s.profile,
                 xd.abs(),
-                (d.d1_n_s_per_mm / (3.0 * d.d2_n_s3_per_mm3.abs())).sqrt()
+                (d.d1_n_s_per_mm / (3.0 * d.d2_n_s3_per_mm3.abs())).sqrt(),
+                // This instant's speed scaled to 80 % of the limit (a later, faster instant
+                // may need less).
+                0.8 * s.speed * (d.d1_n_s_per_mm / (3.0 * d.d2_n_s3_per_mm3.abs())).sqrt() / xd.abs()
             )));
         }
         let sgn = if xd > 0.0 {

@@ -7,9 +7,10 @@ use serde_json::{json, Map, Value};
 
 use super::plot::{self, Panel, Series};
 use crate::estimate::ekf::{idx, EkfRun, EkfSettings, STATE_NAMES};
-use crate::estimate::identify::{Identification, Param, SensorNoise};
+use crate::estimate::identify::{Identification, Param, SensorNoise, WindowMethod};
 use crate::estimate::log::CalibrationLog;
 use crate::estimate::noise::NoiseModel;
+use crate::estimate::pipeline::EstimateRun;
 use crate::verdict::validate::{spring_force_n, CurveValidation, Validation};
 
 /// `camspring noise --json`.
@@ -167,6 +168,13 @@ pub fn identification_json(
         "sample_rate_hz": 1.0 / log.dt_s(),
         "sg_window_samples": id.sg_window,
         "sg_window_s": id.sg_window_s,
+        "window_choice": id.window_choice,
+        "fit": {
+            "status": id.adequacy.status,
+            "reduced_chi2": id.adequacy.reduced_chi2,
+            "whiteness": id.adequacy.whiteness,
+            "reasons": id.adequacy.reasons,
+        },
         "noise": {
             "force_variance_n2": noise.force_variance_n2,
             "position_variance_mm2": noise.position_variance_mm2,
@@ -186,11 +194,25 @@ pub fn format_identification(id: &Identification) -> String {
         ("k2", "1/mm"),
     ];
     let mut s = String::new();
+    let chosen = match id.window_choice.method {
+        WindowMethod::Given => "given".to_string(),
+        WindowMethod::Balancing => format!(
+            "chosen from {} windows by the balancing principle",
+            id.window_choice.candidates.len()
+        ),
+    };
     let _ = writeln!(
         s,
-        "Identified from {} samples ({} moving, {} quasi-static; Savitzky-Golay window {} samples = {:.3} s)",
+        "Identified from {} samples ({} moving, {} quasi-static; Savitzky-Golay window {} samples = {:.3} s, {chosen})",
         id.samples, id.dynamic_samples, id.quasi_static_samples, id.sg_window, id.sg_window_s
     );
+    if let Some(problem) = id.adequacy.problem() {
+        let _ = writeln!(
+            s,
+            "THE MODEL DOES NOT FIT THIS LOG: {problem}. The numbers below are the best fit of a \
+             model that does not explain the data; do not use them as the transmission's parameters."
+        );
+    }
     for ((p, e), (sym, unit)) in id.parameters.iter().zip(units.iter()) {
         match e {
             crate::estimate::identify::Estimate {
@@ -227,6 +249,26 @@ pub fn format_identification(id: &Identification) -> String {
          quasi-static samples alone {:.5} 1/mm",
         id.residual_rms_n, id.reduced_chi2, id.condition_number, id.k2_quasi_static_per_mm
     );
+    match &id.adequacy.whiteness {
+        Some(w) => {
+            let _ = writeln!(
+                s,
+                "  residual whiteness: statistic {:.1} over {} lags of {} samples, p = {:.2} ({})",
+                w.statistic,
+                w.lags,
+                w.lag_spacing_samples,
+                w.p_value,
+                if w.p_value < crate::estimate::identify::WHITENESS_LEVEL {
+                    "coloured"
+                } else {
+                    "white"
+                }
+            );
+        }
+        None => {
+            let _ = writeln!(s, "  residual whiteness: too few samples to test");
+        }
+    }
     s
 }
 
@@ -256,7 +298,8 @@ pub fn estimate_csv(run: &EkfRun) -> Vec<u8> {
 /// The final estimates (the paper's Table II) under the unit-bearing keys of `identify`,
 /// each with `_std`: k2_per_mm, m_n_s2_per_mm, d2_n_s3_per_mm3, sigma_n_per_mm (at the last
 /// sample), d_n_s_per_mm (at the last sample), f0_n and d0_n (parallel filter).
-pub fn estimate_json(run: &EkfRun, settings: &EkfSettings) -> Value {
+pub fn estimate_json(est: &EstimateRun) -> Value {
+    let (run, settings) = (&est.run, &est.settings);
     let z = run.last.z;
     let sd = run.last.std();
     let f = run.offset_filter.theta;
@@ -275,8 +318,54 @@ pub fn estimate_json(run: &EkfRun, settings: &EkfSettings) -> Value {
         "samples": run.states.len(),
         "first_sample": run.first_sample,
         "outliers": run.outliers,
+        "held": held_states(settings),
+        "recovery": est.recovery,
+        "consistency": est.consistency,
         "settings": settings,
     })
+}
+
+/// The states the filter held at their initial value (no initial variance, no process noise).
+fn held_states(settings: &EkfSettings) -> Vec<&'static str> {
+    (0..8)
+        .filter(|&i| settings.p0_std[i] == 0.0 && settings.q[i] == 0.0)
+        .map(|i| STATE_NAMES[i])
+        .collect()
+}
+
+/// The text on how far `estimate`'s numbers can be trusted: held states, a recovery from
+/// divergence, and the consistency verdict.
+pub fn format_consistency(est: &EstimateRun) -> String {
+    let mut s = String::new();
+    let held = held_states(&est.settings);
+    if !held.is_empty() {
+        let _ = writeln!(
+            s,
+            "  held at identification's value (not resolved by it, so not estimated): {}",
+            held.join(", ")
+        );
+    }
+    if let Some(r) = &est.recovery {
+        let _ = writeln!(s, "note: {r}");
+    }
+    let c = &est.consistency;
+    let _ = writeln!(
+        s,
+        "  consistency: mean normalised innovation squared {:.2}{}",
+        c.nis_mean,
+        c.agreement
+            .iter()
+            .map(|a| format!("; {} {:.1} sigma from identification", a.state, a.sigmas))
+            .collect::<String>()
+    );
+    if !c.consistent {
+        let _ = writeln!(
+            s,
+            "THE FILTER IS NOT CONSISTENT ON THIS LOG: {}",
+            c.reasons.join("; ")
+        );
+    }
+    s
 }
 
 /// The text summary of `camspring estimate`.

@@ -156,6 +156,10 @@ pub enum Command {
         /// Random seed (noise and step levels).
         #[arg(long, default_value_t = 0)]
         seed: u64,
+        /// Speed of the profile relative to its nominal one (0.25 for a heavy damper whose
+        /// force would otherwise fall with speed; 0.01 to 10).
+        #[arg(long, default_value_t = 1.0)]
+        speed: f64,
         /// Inertia m in N s^2/mm.
         #[arg(long, default_value_t = 0.05, allow_hyphen_values = true)]
         m: f64,

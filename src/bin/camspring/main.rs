@@ -20,12 +20,13 @@ use camspring::app::{
     EXIT_CHECK_FAILED, EXIT_IO, EXIT_OK,
 };
 use camspring::cam::checks::Status;
+use camspring::estimate::identify::FitStatus;
 use camspring::estimate::log::{parse_column, parse_time_column, ColumnMap};
 use camspring::estimate::sim::{Dynamics, Noise, SimSettings};
 use camspring::export::ExportError;
 use camspring::render::calibration::{
-    estimate_json, format_curve_validation, format_estimate, format_identification, format_noise,
-    format_validation, identification_json, noise_json,
+    estimate_json, format_consistency, format_curve_validation, format_estimate,
+    format_identification, format_noise, format_validation, identification_json, noise_json,
 };
 use camspring::render::design::format_design;
 use camspring::units::Dimension;
@@ -405,6 +406,7 @@ fn main() -> ExitCode {
             duration,
             rate,
             seed,
+            speed,
             m,
             d0,
             d1,
@@ -417,6 +419,7 @@ fn main() -> ExitCode {
                 duration_s: duration,
                 rate_hz: rate,
                 seed,
+                speed,
                 dynamics: Dynamics {
                     m_n_s2_per_mm: m,
                     d0_n: d0,
@@ -487,9 +490,15 @@ fn main() -> ExitCode {
                 let map = columns(&c)?;
                 let sensor = sensors(&s)?;
                 let (id, log) = run_identify(&log, &map, c.sampling_tolerance, &sensor, s.window)?;
-                Ok(Report::new(
+                let code = if id.adequacy.status == FitStatus::DoesNotFit {
+                    EXIT_CHECK_FAILED
+                } else {
+                    EXIT_OK
+                };
+                Ok(Report::of_checks(
                     format_identification(&id),
                     to_json(&identification_json(&id, &sensor, &log))?,
+                    code,
                 ))
             })(),
             json,
@@ -503,13 +512,20 @@ fn main() -> ExitCode {
             (|| {
                 let (map, tol, opts) = calibration_options(&calibration)?;
                 let (est, path) = run_estimate(&log, &map, tol, &opts, out.as_deref())?;
-                Ok(Report::new(
+                let code = if est.consistency.consistent {
+                    EXIT_OK
+                } else {
+                    EXIT_CHECK_FAILED
+                };
+                Ok(Report::of_checks(
                     format!(
-                        "{}  time series: {}\n",
+                        "{}{}  time series: {}\n",
                         format_estimate(&est.run),
+                        format_consistency(&est),
                         path.display()
                     ),
-                    to_json(&estimate_json(&est.run, &est.settings))?,
+                    to_json(&estimate_json(&est))?,
+                    code,
                 ))
             })(),
             json,
