@@ -215,6 +215,9 @@ pub struct Identification {
     pub window_choice: WindowChoice,
     /// Whether the model explains this log: reduced chi-square and residual whiteness.
     pub adequacy: Adequacy,
+    /// The filter's estimated bias in each parameter, in model order, already included in the
+    /// standard deviations (zero when the window was given, or none was seen).
+    pub filter_bias_std: [f64; 7],
 }
 
 impl Identification {
@@ -766,7 +769,7 @@ pub const WINDOW_RATIO: f64 = std::f64::consts::SQRT_2;
 
 /// How many combined standard deviations two windows' estimates may differ by before
 /// [`choose_window`] takes the longer one as distorted.
-pub const BALANCING_SIGMAS: f64 = 2.5;
+pub const BALANCING_SIGMAS: f64 = 3.0;
 
 /// How the Savitzky-Golay window was chosen.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -923,16 +926,54 @@ pub fn choose_window(
             error: f.as_ref().err().map(|e| e.to_string()),
         })
         .collect();
+    // The next shorter admissible window, whose estimates bound the filter's bias at the
+    // chosen one.
+    let shorter = admissible
+        .iter()
+        .rev()
+        .find(|&&i| i < chosen)
+        .and_then(|&i| fits[i].as_ref().ok())
+        .map(|id| id.parameters);
     let mut id = fits
         .into_iter()
         .nth(chosen)
         .and_then(Result::ok)
         .ok_or_else(|| IdentifyError::NoConvergence("no window was chosen".into()))?;
+    if let Some(shorter) = shorter {
+        add_filter_bias(&mut id, &shorter);
+    }
     id.window_choice = WindowChoice {
         method: WindowMethod::Balancing,
         candidates,
     };
     Ok(id)
+}
+
+/// Adds an estimate of the filter's bias to the chosen window's variances.
+///
+/// The distortion of a Savitzky-Golay filter grows as a high power of its window, so most of the
+/// bias at the chosen window shows as the change from the next shorter one. That change also
+/// carries noise, of variance about s_short^2 - s_chosen^2; what exceeds it,
+/// max(0, change^2 - (s_short^2 - s_chosen^2)), is counted as systematic and added to the
+/// parameter's variance (`filter_bias_std`). On a log the filter follows, it is zero on average.
+fn add_filter_bias(id: &mut Identification, shorter: &Estimates) {
+    let names = id.covariance_parameters.clone();
+    for p in Param::ALL {
+        let (a, b) = (shorter.get(p), id.get(p));
+        let (Some(va), Some(sa), Some(vb), Some(sb)) = (a.value, a.std, b.value, b.std) else {
+            continue;
+        };
+        let noise = (sa * sa - sb * sb).max(0.0);
+        let systematic = ((va - vb).powi(2) - noise).max(0.0);
+        if systematic == 0.0 {
+            continue;
+        }
+        id.filter_bias_std[p.index()] = systematic.sqrt();
+        id.parameters.0[p.index()].std = Some((sb * sb + systematic).sqrt());
+        if let Some(k) = names.iter().position(|n| n == p.key()) {
+            id.covariance[k][k] += systematic;
+        }
+    }
 }
 
 /// Whether every parameter that both fits identify agrees within [`BALANCING_SIGMAS`]
@@ -1168,6 +1209,7 @@ fn fit(
             candidates: Vec::new(),
         },
         adequacy,
+        filter_bias_std: [0.0; 7],
     })
 }
 
