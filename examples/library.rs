@@ -55,6 +55,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         time: parse_time_column("time_ms:ms")?,
         force: parse_column("F:lbf", Dimension::Force, "force")?,
         position: parse_column("x:in", Dimension::Length, "position")?,
+        ..ColumnMap::default()
     };
     let log = read_log(rig.as_bytes(), &map, 0.1, |_| {})?;
 

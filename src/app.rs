@@ -7,7 +7,9 @@ use std::path::{Path, PathBuf};
 use crate::cam::checks::Status;
 use crate::design::{design, law_of};
 use crate::error::{Error, Result};
-use crate::estimate::pipeline::{estimate, EstimateOptions, EstimateRun, StateName};
+use crate::estimate::pipeline::{
+    estimate, EstimateOptions, EstimateRun, PositionOffset, StateName,
+};
 use crate::export::{write_atomic, write_design, ExportError};
 use crate::model::{ExpLaw, ForceLaw, Spec};
 use crate::outputs::{plan, DesignSummary};
@@ -273,10 +275,39 @@ pub fn read_log_file(
     if let Some(b) = bar {
         b.finish_and_clear();
     }
-    result.map_err(|source| Error::Log {
+    let log = result.map_err(|source| Error::Log {
         path: path.to_path_buf(),
-        source,
-    })
+        source: Box::new(source),
+    })?;
+    if let Some(w) = filled_warning(&log) {
+        eprintln!("warning: {}: {w}", path.display());
+    }
+    Ok(log)
+}
+
+/// The warning for dropped samples that the reader filled, listing them (the first ten).
+pub fn filled_warning(log: &crate::estimate::log::CalibrationLog) -> Option<String> {
+    if log.filled.is_empty() {
+        return None;
+    }
+    let total: usize = log.filled.iter().map(|g| g.samples).sum();
+    let list: Vec<String> = log
+        .filled
+        .iter()
+        .take(10)
+        .map(|g| {
+            format!(
+                "{} before line {} (after t = {} s)",
+                g.samples, g.line, g.after_s
+            )
+        })
+        .collect();
+    Some(format!(
+        "{total} dropped sample(s) in {} gap(s) filled by linear interpolation: {}{}",
+        log.filled.len(),
+        list.join(", "),
+        if log.filled.len() > 10 { ", ..." } else { "" }
+    ))
 }
 
 /// What `camspring noise` found and wrote.
@@ -490,7 +521,25 @@ pub fn run_validate(
         }
     };
     let tolerance = tolerance.unwrap_or(crate::verdict::validate::BAND_MODE_TOLERANCE);
-    let log = read_log_file(log_path, map, sampling_tolerance, true)?;
+    let mut log = read_log_file(log_path, map, sampling_tolerance, true)?;
+    // The encoder zero: fitted against the design (auto) or given; taken out of the log here,
+    // so that every verdict below sees the corrected positions.
+    let offset_mm = match opts.position_offset {
+        PositionOffset::None => None,
+        PositionOffset::Mm(c) => Some(c),
+        PositionOffset::Auto => Some(crate::estimate::pipeline::fit_offset_by_identification(
+            &log,
+            &opts.noise,
+            &designed,
+        )?),
+    };
+    if let Some(c) = offset_mm {
+        log.shift_position(c);
+    }
+    let opts = &EstimateOptions {
+        position_offset: PositionOffset::None,
+        ..opts.clone()
+    };
     let log_name = log_path
         .file_name()
         .map_or(String::new(), |n| n.to_string_lossy().into_owned());
@@ -509,12 +558,41 @@ pub fn run_validate(
                 tolerance,
                 band.as_ref(),
             );
+            let mut v = v;
+            v.position_offset_mm = offset_mm;
+            let (c, cov) = crate::verdict::validate::coverage(
+                &designed,
+                v.range_min_mm,
+                v.range_max_mm,
+                spec.law.xmax_mm(),
+            );
+            v.pass &= c.pass;
+            v.criteria.push(c);
+            v.coverage = Some(cov);
             let svg_text = validation_svg(&v, &est.run);
-            let html = crate::render::html::validation_html(&v, &svg_text, &log_name);
+            // The measured force-deflection points come from the quasi-static curve.
+            let points = validate_curve(&designed, &log, &opts.noise, tolerance, band.as_ref());
+            let force_svg = crate::render::calibration::force_points_svg(
+                &points,
+                &designed,
+                spec.law.xmax_mm(),
+                band.as_ref(),
+            );
+            let html = crate::render::html::validation_html(&v, &svg_text, &log_name, &force_svg);
             (Verdict::Law(v), svg_text, html)
         }
         ForceLaw::Table(_) | ForceLaw::Polynomial(_) => {
-            let v = validate_curve(&designed, &log, &opts.noise, tolerance, band.as_ref());
+            let mut v = validate_curve(&designed, &log, &opts.noise, tolerance, band.as_ref());
+            v.position_offset_mm = offset_mm;
+            let (c, cov) = crate::verdict::validate::coverage(
+                &designed,
+                v.range_min_mm,
+                v.range_max_mm,
+                spec.law.xmax_mm(),
+            );
+            v.pass &= c.pass;
+            v.criteria.push(c);
+            v.coverage = Some(cov);
             let svg_text = curve_validation_svg(&v);
             let html = crate::render::html::curve_validation_html(&v, &svg_text, &log_name);
             (Verdict::Curve(v), svg_text, html)

@@ -34,7 +34,7 @@ pub enum Error {
         path: PathBuf,
         /// What is wrong, with the line.
         #[source]
-        source: crate::estimate::log::LogError,
+        source: Box<crate::estimate::log::LogError>,
     },
     /// Produced by [`crate::app::run_simulate`] when the run cannot be simulated.
     #[error("simulate: {0}")]

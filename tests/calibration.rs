@@ -186,11 +186,7 @@ fn poor_excitation_names_the_parameters_this_log_cannot_identify() {
         Normal::new(0.0, 0.017f64.sqrt()).unwrap(),
         Normal::new(0.0, 0.1).unwrap(),
     );
-    let mut log = CalibrationLog {
-        t_s: vec![],
-        force_n: vec![],
-        position_mm: vec![],
-    };
+    let mut log = CalibrationLog::default();
     for i in 0..500 {
         let t = i as f64 * 0.01;
         let x = 2.0 + 3.0 * t;
@@ -383,10 +379,14 @@ fn malformed_logs_are_refused_with_the_line() {
         "{e}"
     );
 
-    let gap = good.replacen("0.10,20,1\n", "", 1);
-    let e = read(&gap).unwrap_err();
+    // An interval that is not a whole number of sampling intervals.
+    let irregular = good.replacen("0.10,20,1\n", "0.105,20,1\n", 1);
+    let e = read(&irregular).unwrap_err();
     assert!(matches!(e, LogError::Irregular { line: 12, .. }), "{e}");
     assert!(e.to_string().contains("gap"), "{e}");
+    // One dropped sample is filled (tests/rig_logs.rs has the rest).
+    let dropped = good.replacen("0.10,20,1\n", "", 1);
+    assert_eq!(read(&dropped).unwrap().len(), 40);
 
     let e = read(&rows(5)).unwrap_err();
     assert!(matches!(e, LogError::TooShort { found: 5, .. }), "{e}");
@@ -421,6 +421,7 @@ fn mapped_columns_and_units_read_the_same_log() {
             "position",
         )
         .unwrap(),
+        delimiter: camspring::estimate::log::Delimiter::Auto,
     };
     let back = read_log(text.as_bytes(), &map, 0.1, |_| {}).unwrap();
     for i in 0..log.len() {

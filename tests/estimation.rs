@@ -52,6 +52,7 @@ fn options(noise: Noise, discretization: Discretization) -> EstimateOptions {
         q: Vec::new(),
         p0_std: Vec::new(),
         r_position_mm2: None,
+        position_offset: camspring::estimate::pipeline::PositionOffset::None,
     }
 }
 

@@ -31,7 +31,105 @@ pub struct ColumnMap {
     pub force: Column,
     /// Position (to mm).
     pub position: Column,
+    /// Field separator.
+    pub delimiter: Delimiter,
 }
+
+/// The field separator of a log.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Delimiter {
+    /// Detected from the header line: the most frequent of comma, tab and semicolon.
+    #[default]
+    Auto,
+    /// `,`
+    Comma,
+    /// A tab.
+    Tab,
+    /// `;`
+    Semicolon,
+}
+
+impl Delimiter {
+    /// The byte, detecting `Auto` from the header line.
+    fn byte(self, header: &str) -> u8 {
+        match self {
+            Delimiter::Comma => b',',
+            Delimiter::Tab => b'\t',
+            Delimiter::Semicolon => b';',
+            Delimiter::Auto => {
+                let count = |c: char| header.matches(c).count();
+                [(b',', count(',')), (b'\t', count('\t')), (b';', count(';'))]
+                    .into_iter()
+                    .max_by_key(|&(_, n)| n)
+                    .filter(|&(_, n)| n > 0)
+                    .map_or(b',', |(b, _)| b)
+            }
+        }
+    }
+
+    /// Its name in messages.
+    fn name(byte: u8) -> &'static str {
+        match byte {
+            b'\t' => "tab",
+            b';' => "semicolon",
+            _ => "comma",
+        }
+    }
+}
+
+/// Whether a line is a comment (`#` or `;` first, after blanks) or blank.
+fn is_comment_or_blank(line: &[u8]) -> bool {
+    match line.iter().find(|b| !b.is_ascii_whitespace()) {
+        None => true,
+        Some(b) => *b == b'#' || *b == b';',
+    }
+}
+
+/// A reader that blanks comment lines (keeping their line breaks, so that line numbers stay
+/// those of the file; the CSV reader skips blank lines).
+struct WithoutComments<R> {
+    inner: R,
+    line: Vec<u8>,
+    at: usize,
+}
+
+impl<R: std::io::BufRead> Read for WithoutComments<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        if self.at >= self.line.len() {
+            self.line.clear();
+            self.at = 0;
+            if self.inner.read_until(b'\n', &mut self.line)? == 0 {
+                return Ok(0);
+            }
+            if is_comment_or_blank(&self.line) {
+                let ends_cr = self.line.ends_with(b"\r\n");
+                self.line.clear();
+                self.line
+                    .extend_from_slice(if ends_cr { b"\r\n" } else { b"\n" });
+            }
+        }
+        let n = buf.len().min(self.line.len() - self.at);
+        buf[..n].copy_from_slice(&self.line[self.at..self.at + n]);
+        self.at += n;
+        Ok(n)
+    }
+}
+
+/// Samples filled in by interpolation where a log dropped them.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FilledGap {
+    /// Line of the sample after the gap.
+    pub line: u64,
+    /// Time of the last sample before the gap (s).
+    pub after_s: f64,
+    /// Samples filled.
+    pub samples: usize,
+}
+
+/// The most consecutive dropped samples [`read_log`] fills by interpolation; a longer gap is
+/// refused.
+pub const MAX_FILLED_SAMPLES: usize = 3;
 
 impl Default for ColumnMap {
     fn default() -> Self {
@@ -48,6 +146,7 @@ impl Default for ColumnMap {
                 name: "position_mm".into(),
                 factor: 1.0,
             },
+            delimiter: Delimiter::Auto,
         }
     }
 }
@@ -96,14 +195,40 @@ pub enum LogError {
     #[error("{0}")]
     Io(String),
     /// Produced by [`read_log`] for a header without a needed column.
-    #[error("line 1: no column \"{name}\" for {what}; the header has: {header}")]
+    #[error(
+        "line {line}: no column \"{name}\" for {what}; the header, split at {delimiter}s, has the columns {}{}",
+        columns.iter().map(|c| quoted(c)).collect::<Vec<_>>().join(", "),
+        if header.contains(name.as_str()) && !columns.iter().any(|c| c == name) {
+            format!("; the header line contains \"{name}\" but not as a field of its own: give --delimiter comma, tab or semicolon")
+        } else {
+            String::new()
+        }
+    )]
     MissingColumn {
+        /// Line of the header.
+        line: u64,
         /// Column asked for.
         name: String,
         /// time, force or position.
         what: &'static str,
         /// The header found.
         header: String,
+        /// The columns read from it.
+        columns: Vec<String>,
+        /// The separator used.
+        delimiter: &'static str,
+    },
+    /// Produced by [`read_log`] for dropped samples it does not fill: more than
+    /// [`MAX_FILLED_SAMPLES`] in a row.
+    #[error(
+        "the log has {} gap(s) longer than {MAX_FILLED_SAMPLES} samples, which are not filled: {}; \
+         expected an evenly sampled log with at most {MAX_FILLED_SAMPLES} dropped samples in a row",
+        gaps.len(),
+        gaps.iter().take(10).map(|g| format!("line {} ({} samples missing after t = {} s)", g.line, g.samples, g.after_s)).collect::<Vec<_>>().join(", ")
+    )]
+    Gaps {
+        /// The gaps (at most the first 100).
+        gaps: Vec<FilledGap>,
     },
     /// Produced by [`read_log`] for a value that is not a finite number.
     #[error(
@@ -143,10 +268,12 @@ pub enum LogError {
     },
     /// Produced by [`read_log`] when the header names a mapped column more than once.
     #[error(
-        "line 1: the header has {count} columns named \"{name}\" (the {what} column); \
+        "line {line}: the header has {count} columns named \"{name}\" (the {what} column); \
          expected exactly one, so that the column read is not a guess"
     )]
     DuplicateColumn {
+        /// Line of the header.
+        line: u64,
         /// Column name.
         name: String,
         /// time, force or position.
@@ -210,8 +337,10 @@ impl LogError {
             | LogError::ShortRow { line, .. }
             | LogError::TimeNotIncreasing { line, .. }
             | LogError::Irregular { line, .. }
-            | LogError::OutOfRange { line, .. } => Some(*line),
-            LogError::DuplicateColumn { .. } | LogError::MissingColumn { .. } => Some(1),
+            | LogError::OutOfRange { line, .. }
+            | LogError::DuplicateColumn { line, .. }
+            | LogError::MissingColumn { line, .. } => Some(*line),
+            LogError::Gaps { gaps } => gaps.first().map(|g| g.line),
             _ => None,
         }
     }
@@ -222,7 +351,7 @@ impl LogError {
 pub const MAX_MAGNITUDE: f64 = 1e9;
 
 /// An evenly sampled calibration log in s, N and mm.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize)]
 pub struct CalibrationLog {
     /// Time.
     pub t_s: Vec<f64>,
@@ -230,9 +359,28 @@ pub struct CalibrationLog {
     pub force_n: Vec<f64>,
     /// Deflection.
     pub position_mm: Vec<f64>,
+    /// Dropped samples that the reader filled by interpolation (a warning for the user).
+    #[serde(skip)]
+    pub filled: Vec<FilledGap>,
 }
 
 impl CalibrationLog {
+    /// Moves the encoder zero: every position becomes x - `offset_mm`.
+    pub fn shift_position(&mut self, offset_mm: f64) {
+        for x in self.position_mm.iter_mut() {
+            *x -= offset_mm;
+        }
+    }
+
+    /// The smallest and largest position (mm).
+    pub fn position_range_mm(&self) -> (f64, f64) {
+        self.position_mm
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+                (a.min(x), b.max(x))
+            })
+    }
+
     /// Sampling interval (mean).
     pub fn dt_s(&self) -> f64 {
         (self.t_s[self.t_s.len() - 1] - self.t_s[0]) / (self.t_s.len() - 1) as f64
@@ -249,36 +397,77 @@ impl CalibrationLog {
 
 /// Reads a log. `sampling_tolerance` is the allowed relative deviation of each interval from
 /// the first (0.1 = 10 %). `progress` is called with the bytes read so far.
+///
+/// Rig logs come as they are: lines that start with `#` or `;` (after blanks) and blank lines
+/// are skipped anywhere; the field separator is the map's, or detected from the header line
+/// (comma, tab or semicolon). An interval of k nominal intervals (within the tolerance) is k - 1
+/// dropped samples: up to [`MAX_FILLED_SAMPLES`] in a row are filled by linear interpolation
+/// and listed in [`CalibrationLog::filled`]; longer gaps are refused, all of them named.
 pub fn read_log<R: Read>(
     reader: R,
     map: &ColumnMap,
     sampling_tolerance: f64,
     mut progress: impl FnMut(u64),
 ) -> Result<CalibrationLog, LogError> {
+    let mut lines = std::io::BufReader::new(reader);
+    // The header is the first line that is not a comment or blank.
+    let mut header_line = 0u64;
+    let mut header_text = Vec::new();
+    loop {
+        header_text.clear();
+        let n = std::io::BufRead::read_until(&mut lines, b'\n', &mut header_text)
+            .map_err(|e| LogError::Io(format!("line {}: {e}", header_line + 1)))?;
+        header_line += 1;
+        if n == 0 {
+            return Err(LogError::Io(format!(
+                "line {header_line}: no header line (the log is empty or holds only comments); \
+                 expected a header such as t_s,force_n,position_mm"
+            )));
+        }
+        if !is_comment_or_blank(&header_text) {
+            break;
+        }
+    }
+    let header_str = String::from_utf8_lossy(&header_text).into_owned();
+    let delimiter = map.delimiter.byte(&header_str);
+    // The CSV reader sees the header, then the rest with comments blanked; its line numbers
+    // are offset by the lines before the header.
+    let body = WithoutComments {
+        inner: lines,
+        line: Vec::new(),
+        at: 0,
+    };
     let mut rdr = csv::ReaderBuilder::new()
         .has_headers(true)
         .flexible(true)
-        .from_reader(reader);
+        .delimiter(delimiter)
+        .from_reader(std::io::Cursor::new(header_text.clone()).chain(body));
+    let offset = header_line - 1;
     let header = rdr
         .headers()
-        .map_err(|e| LogError::Io(format!("line 1: {e}")))?
+        .map_err(|e| LogError::Io(format!("line {header_line}: {e}")))?
         .clone();
+    let columns: Vec<String> = header.iter().map(|h| h.trim().to_string()).collect();
     let find = |c: &Column, what: &'static str| {
-        let count = header.iter().filter(|h| h.trim() == c.name).count();
+        let count = columns.iter().filter(|h| **h == c.name).count();
         if count > 1 {
             return Err(LogError::DuplicateColumn {
+                line: header_line,
                 name: c.name.clone(),
                 what,
                 count,
             });
         }
-        header
+        columns
             .iter()
-            .position(|h| h.trim() == c.name)
+            .position(|h| *h == c.name)
             .ok_or_else(|| LogError::MissingColumn {
+                line: header_line,
                 name: c.name.clone(),
                 what,
-                header: header.iter().collect::<Vec<_>>().join(","),
+                header: header_str.trim_end().to_string(),
+                columns: columns.clone(),
+                delimiter: Delimiter::name(delimiter),
             })
     };
     let cols = [
@@ -288,11 +477,8 @@ pub fn read_log<R: Read>(
     ];
     let factors = [map.time.factor, map.force.factor, map.position.factor];
     let names = [&map.time.name, &map.force.name, &map.position.name];
-    let mut log = CalibrationLog {
-        t_s: Vec::new(),
-        force_n: Vec::new(),
-        position_mm: Vec::new(),
-    };
+    let mut log = CalibrationLog::default();
+    let mut long_gaps: Vec<FilledGap> = Vec::new();
     let mut record = csv::StringRecord::new();
     let mut nominal: Option<f64> = None;
     loop {
@@ -300,11 +486,11 @@ pub fn read_log<R: Read>(
             Ok(false) => break,
             Ok(true) => {}
             Err(e) => {
-                let line = e.position().map_or(0, |p| p.line());
+                let line = e.position().map_or(0, |p| p.line()) + offset;
                 return Err(LogError::Io(format!("line {line}: {e}")));
             }
         }
-        let line = record.position().map_or(0, |p| p.line());
+        let line = record.position().map_or(0, |p| p.line()) + offset;
         if record.len() < header.len() {
             return Err(LogError::ShortRow {
                 line,
@@ -350,12 +536,39 @@ pub fn read_log<R: Read>(
             match nominal {
                 None => nominal = Some(dt),
                 Some(n) if (dt - n).abs() > sampling_tolerance * n => {
-                    return Err(LogError::Irregular {
+                    // Dropped samples: a whole number of intervals, within the tolerance.
+                    let k = (dt / n).round();
+                    if k < 2.0 || (dt - k * n).abs() > sampling_tolerance * n {
+                        return Err(LogError::Irregular {
+                            line,
+                            dt_s: dt,
+                            nominal_s: n,
+                            tolerance_percent: sampling_tolerance * 100.0,
+                        });
+                    }
+                    let missing = (k as usize).saturating_sub(1);
+                    let gap = FilledGap {
                         line,
-                        dt_s: dt,
-                        nominal_s: n,
-                        tolerance_percent: sampling_tolerance * 100.0,
-                    })
+                        after_s: prev,
+                        samples: missing,
+                    };
+                    if missing > MAX_FILLED_SAMPLES {
+                        if long_gaps.len() < 100 {
+                            long_gaps.push(gap);
+                        }
+                    } else {
+                        let (f0, x0) = (
+                            *log.force_n.last().unwrap_or(&v[1]),
+                            *log.position_mm.last().unwrap_or(&v[2]),
+                        );
+                        for j in 1..=missing {
+                            let a = j as f64 / (missing + 1) as f64;
+                            log.t_s.push(prev + a * dt);
+                            log.force_n.push(f0 + a * (v[1] - f0));
+                            log.position_mm.push(x0 + a * (v[2] - x0));
+                        }
+                        log.filled.push(gap);
+                    }
                 }
                 Some(_) => {}
             }
@@ -366,6 +579,9 @@ pub fn read_log<R: Read>(
         if log.t_s.len().is_multiple_of(65_536) {
             progress(record.position().map_or(0, |p| p.byte()));
         }
+    }
+    if !long_gaps.is_empty() {
+        return Err(LogError::Gaps { gaps: long_gaps });
     }
     if log.len() < 16 {
         return Err(LogError::TooShort {

@@ -276,6 +276,7 @@ pub fn simulate(
         t_s: Vec::with_capacity(n),
         force_n: Vec::with_capacity(n),
         position_mm: Vec::with_capacity(n),
+        filled: Vec::new(),
     };
     let mut truth = Truth {
         law: law.clone(),

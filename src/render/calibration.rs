@@ -435,6 +435,35 @@ pub fn format_validation(v: &Validation) -> String {
         v.ekf_k2_per_mm_std
     );
     s.push_str(&band_exit_lines(&v.band_exits));
+    s.push_str(&coverage_lines(v.coverage.as_ref(), v.position_offset_mm));
+    s
+}
+
+/// The coverage and encoder-zero lines of a verdict.
+fn coverage_lines(c: Option<&crate::verdict::validate::Coverage>, offset: Option<f64>) -> String {
+    let mut s = String::new();
+    if let Some(o) = offset {
+        let _ = writeln!(
+            s,
+            "  encoder zero: {o:+.3} mm taken out of the log's positions (x = x_logged - offset)"
+        );
+    }
+    if let Some(c) = c {
+        let _ = writeln!(
+            s,
+            "  coverage: x = {:.2} ... {:.2} mm, {:.0} % of the {:.2} mm stroke; designed force {:.1} ... {:.1} N of Fmax {:.1} N",
+            c.from_mm,
+            c.to_mm,
+            100.0 * c.stroke_fraction,
+            c.xmax_mm,
+            c.force_from_n,
+            c.force_to_n,
+            c.fmax_n
+        );
+        for w in &c.warnings {
+            let _ = writeln!(s, "warning: {w}");
+        }
+    }
     s
 }
 
@@ -589,6 +618,7 @@ pub fn format_curve_validation(v: &CurveValidation) -> String {
         v.bins.len()
     );
     s.push_str(&band_exit_lines(&v.band_exits));
+    s.push_str(&coverage_lines(v.coverage.as_ref(), v.position_offset_mm));
     s
 }
 
@@ -653,4 +683,73 @@ pub fn curve_validation_svg(v: &CurveValidation) -> String {
         ..Default::default()
     };
     plot::document(&[curve, deviation], 620.0, 460.0).to_string()
+}
+
+/// The measured force against deflection (quasi-static, binned, dynamics taken out) over the
+/// designed law across the whole stroke, with the band of builds when there is one: what the
+/// log shows of the spring, and which part of the stroke it covers.
+pub fn force_points_svg(
+    v: &CurveValidation,
+    law: &crate::model::ForceLaw,
+    xmax_mm: f64,
+    band: Option<&crate::cam::tolerance::ForceBand>,
+) -> String {
+    let design: Vec<(f64, f64)> = (0..=100)
+        .map(|i| {
+            let x = xmax_mm * i as f64 / 100.0;
+            (x, law.force_n(x))
+        })
+        .collect();
+    let mut series = vec![
+        Series {
+            label: "designed law".into(),
+            points: design,
+            color: "#000",
+            dashed: false,
+            dots: false,
+        },
+        Series {
+            label: "measured (quasi-static, dynamics removed, binned)".into(),
+            points: v.bins.iter().map(|b| (b.x_mm, b.measured_n)).collect(),
+            color: "#d62728",
+            dashed: false,
+            dots: true,
+        },
+    ];
+    if let Some(b) = band {
+        let upper: Vec<(f64, f64)> = b
+            .x_mm
+            .iter()
+            .zip(&b.loading_hi_n)
+            .filter_map(|(&x, f)| f.map(|f| (x, f)))
+            .collect();
+        let lower: Vec<(f64, f64)> = b
+            .x_mm
+            .iter()
+            .copied()
+            .zip(b.unloading_lo_n.iter().copied())
+            .collect();
+        series.push(Series {
+            label: "band of builds: highest loading force".into(),
+            points: upper,
+            color: "#888",
+            dashed: true,
+            dots: false,
+        });
+        series.push(Series {
+            label: "band of builds: lowest unloading force".into(),
+            points: lower,
+            color: "#bbb",
+            dashed: true,
+            dots: false,
+        });
+    }
+    let panel = Panel {
+        title: "Measured force against deflection over the designed stroke".into(),
+        x_label: "deflection x (mm)".into(),
+        y_label: "force F (N)".into(),
+        series,
+        ..Default::default()
+    };
+    plot::document(&[panel], 760.0, 460.0).to_string()
 }

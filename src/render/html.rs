@@ -400,6 +400,7 @@ pub fn validation_html(
     v: &crate::verdict::validate::Validation,
     validation_svg: &str,
     log_name: &str,
+    force_svg: &str,
 ) -> String {
     let mut h = String::with_capacity(128 * 1024);
     let verdict = if v.pass { "PASS" } else { "FAIL" };
@@ -433,8 +434,51 @@ pub fn validation_html(
         "Left: EKF stiffness against spring force over the converged half of the run, with the \
          designed line. Right: k2 against the design and M against its final value over time.",
     ));
+    h.push_str("<h2>Measured force against deflection</h2>\n");
+    coverage_paragraph(&mut h, v.coverage.as_ref(), v.position_offset_mm);
+    h.push_str(&figure(
+        force_svg,
+        "The log's quasi-static force (inertia, damping and Coulomb friction fitted and taken out, \
+         averaged in bins of deflection) over the designed law across the whole stroke, with the \
+         band of builds that the spec's tolerances allow.",
+    ));
     h.push_str("</body></html>\n");
     h
+}
+
+/// What part of the stroke the log covers, the encoder zero applied, and the warnings.
+fn coverage_paragraph(
+    h: &mut String,
+    c: Option<&crate::verdict::validate::Coverage>,
+    offset: Option<f64>,
+) {
+    if let Some(o) = offset {
+        let _ = writeln!(
+            h,
+            "<p>Encoder zero: {o:+.3} mm taken out of the logged positions.</p>"
+        );
+    }
+    if let Some(c) = c {
+        let _ = writeln!(
+            h,
+            "<p>Coverage: x = {:.2} to {:.2} mm, {:.0} % of the {:.2} mm stroke; designed force \
+             {:.1} to {:.1} N of F<sub>max</sub> {:.1} N.</p>",
+            c.from_mm,
+            c.to_mm,
+            100.0 * c.stroke_fraction,
+            c.xmax_mm,
+            c.force_from_n,
+            c.force_to_n,
+            c.fmax_n
+        );
+        for w in &c.warnings {
+            let _ = writeln!(
+                h,
+                "<p><span class=\"warn\">Warning</span> {}</p>",
+                escape(w)
+            );
+        }
+    }
 }
 
 /// `validation.html` for a law of any form: the verdict on the quasi-static force curve.
@@ -473,6 +517,7 @@ pub fn curve_validation_html(
         "Left: the measured force with the dynamics removed, binned, and the designed law. \
          Right: the relative deviation per bin and the tolerance.",
     ));
+    coverage_paragraph(&mut h, v.coverage.as_ref(), v.position_offset_mm);
     h.push_str("</body></html>\n");
     h
 }

@@ -136,6 +136,10 @@ pub struct Validation {
     pub range_max_mm: f64,
     /// Where the identified force leaves the band of builds (band mode).
     pub band_exits: Vec<BandExit>,
+    /// The encoder zero taken out of the log before judging it (mm), if any.
+    pub position_offset_mm: Option<f64>,
+    /// What part of the designed stroke the log covers (set with [`coverage`]).
+    pub coverage: Option<Coverage>,
 }
 
 /// Compares a log's identification and EKF run with the designed law. With a `band`, the
@@ -232,6 +236,8 @@ pub fn validate(
         range_min_mm: lo,
         range_max_mm: hi,
         band_exits,
+        position_offset_mm: None,
+        coverage: None,
     }
 }
 
@@ -273,6 +279,10 @@ pub struct CurveValidation {
     pub range_max_mm: f64,
     /// Where the quasi-static curve leaves the band of builds (band mode).
     pub band_exits: Vec<BandExit>,
+    /// The encoder zero taken out of the log before judging it (mm), if any.
+    pub position_offset_mm: Option<f64>,
+    /// What part of the designed stroke the log covers (set with [`coverage`]).
+    pub coverage: Option<Coverage>,
 }
 
 /// Bins of the quasi-static curve over the measured range.
@@ -427,5 +437,85 @@ pub fn validate_curve(
         range_min_mm: lo,
         range_max_mm: hi,
         band_exits,
+        position_offset_mm: None,
+        coverage: None,
     }
+}
+
+/// Least share of the designed stroke a log must cover for a verdict ([`Coverage`]).
+pub const MIN_STROKE_COVERED: f64 = 0.5;
+
+/// Share of the designed Fmax (the force at the end of the stroke) that a log must reach, so
+/// that the stiff, high-force end of the law is judged; otherwise the verdict warns.
+pub const TOP_FORCE_SHARE: f64 = 0.5;
+
+/// What part of the designed stroke and force range a log covers.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Coverage {
+    /// Share of the designed stroke 0 ... xmax covered (0 to 1).
+    pub stroke_fraction: f64,
+    /// Covered deflections (mm), within the stroke.
+    pub from_mm: f64,
+    /// To (mm).
+    pub to_mm: f64,
+    /// The designed stroke (mm).
+    pub xmax_mm: f64,
+    /// The designed force over the covered deflections (N).
+    pub force_from_n: f64,
+    /// To (N).
+    pub force_to_n: f64,
+    /// The designed force at the end of the stroke (N).
+    pub fmax_n: f64,
+    /// What the log misses, when it misses something that matters.
+    pub warnings: Vec<String>,
+}
+
+/// The coverage of a log spanning `lo ..= hi` (mm) of a law designed over `0 ..= xmax_mm`, and
+/// its criterion: a log that covers less than [`MIN_STROKE_COVERED`] of the stroke fails
+/// (`coverage`, the uncovered share against its tolerance); one whose designed force never
+/// reaches [`TOP_FORCE_SHARE`] of Fmax passes with a warning.
+pub fn coverage(
+    law: &crate::model::ForceLaw,
+    lo: f64,
+    hi: f64,
+    xmax_mm: f64,
+) -> (Criterion, Coverage) {
+    let from = lo.clamp(0.0, xmax_mm);
+    let to = hi.clamp(0.0, xmax_mm);
+    let fraction = if xmax_mm > 0.0 {
+        ((to - from) / xmax_mm).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let fmax = law.force_n(xmax_mm);
+    let mut warnings = Vec::new();
+    if law.force_n(to) < TOP_FORCE_SHARE * fmax {
+        warnings.push(format!(
+            "the log reaches only x = {to:.2} mm of the {xmax_mm:.2} mm stroke, where the designed force \
+             is {:.1} N, below {:.0} % of Fmax {fmax:.1} N: the stiff end of the law is not judged; \
+             record a run further into the stroke",
+            law.force_n(to),
+            100.0 * TOP_FORCE_SHARE
+        ));
+    }
+    let criterion = Criterion {
+        name: "coverage",
+        what: "share of the designed stroke the log does not cover",
+        deviation_percent: 100.0 * (1.0 - fraction),
+        tolerance_percent: 100.0 * (1.0 - MIN_STROKE_COVERED),
+        pass: fraction >= MIN_STROKE_COVERED,
+    };
+    (
+        criterion,
+        Coverage {
+            stroke_fraction: fraction,
+            from_mm: from,
+            to_mm: to,
+            xmax_mm,
+            force_from_n: law.force_n(from),
+            force_to_n: law.force_n(to),
+            fmax_n: fmax,
+            warnings,
+        },
+    )
 }

@@ -4,6 +4,7 @@
 
 use std::path::PathBuf;
 
+use camspring::estimate::pipeline::PositionOffset;
 use clap::{Parser, Subcommand, ValueEnum};
 
 use camspring::app::InitSource;
@@ -406,6 +407,20 @@ pub struct FilterArgs {
     /// Position measurement variance R in mm^2 (default: the position noise).
     #[arg(long, value_parser = positive_variance)]
     pub r: Option<f64>,
+    /// Encoder zero: `auto` fits it against the designed law (validate, or estimate --init
+    /// SPEC); a length such as 0.5mm is subtracted from every position.
+    #[arg(long, value_name = "auto|LENGTH", default_value = "none", value_parser = position_offset)]
+    pub position_offset: PositionOffset,
+}
+
+fn position_offset(text: &str) -> Result<PositionOffset, String> {
+    match text.trim() {
+        "none" => Ok(PositionOffset::None),
+        "auto" => Ok(PositionOffset::Auto),
+        t => camspring::units::parse_quantity(t, camspring::units::Dimension::Length)
+            .map(PositionOffset::Mm)
+            .map_err(|e| format!("\"{t}\": expected auto, none or a length such as 0.5mm ({e})")),
+    }
 }
 
 /// Column mapping of a calibration log.
@@ -423,6 +438,34 @@ pub struct Columns {
     /// Allowed deviation of each sampling interval from the first, e.g. 10%.
     #[arg(long, default_value = "10%", value_parser = fraction)]
     pub sampling_tolerance: f64,
+    /// Field separator of the log (auto: detected from the header line).
+    #[arg(long, value_enum, default_value_t = DelimiterArg::Auto)]
+    pub delimiter: DelimiterArg,
+}
+
+/// Field separator of a log.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum DelimiterArg {
+    /// The most frequent of comma, tab and semicolon in the header line.
+    Auto,
+    /// ,
+    Comma,
+    /// A tab.
+    Tab,
+    /// ;
+    Semicolon,
+}
+
+impl From<DelimiterArg> for camspring::estimate::log::Delimiter {
+    fn from(d: DelimiterArg) -> Self {
+        use camspring::estimate::log::Delimiter;
+        match d {
+            DelimiterArg::Auto => Delimiter::Auto,
+            DelimiterArg::Comma => Delimiter::Comma,
+            DelimiterArg::Tab => Delimiter::Tab,
+            DelimiterArg::Semicolon => Delimiter::Semicolon,
+        }
+    }
 }
 
 fn duration(text: &str) -> Result<f64, String> {

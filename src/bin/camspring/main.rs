@@ -209,6 +209,7 @@ fn filter_options(f: &FilterArgs, s: &Sensors) -> Result<EstimateOptions, Error>
             .map(|t| parse_state_override(t, "--p0"))
             .collect::<Result<_, _>>()?;
     opts.r_position_mm2 = f.r;
+    opts.position_offset = f.position_offset;
     app::with_init(opts, &f.init)
 }
 
@@ -227,6 +228,7 @@ fn columns(c: &Columns) -> Result<ColumnMap, Error> {
         time: parse_time_column(&c.time).map_err(arg)?,
         force: parse_column(&c.force, Dimension::Force, "force").map_err(arg)?,
         position: parse_column(&c.position, Dimension::Length, "position").map_err(arg)?,
+        delimiter: c.delimiter.into(),
     })
 }
 

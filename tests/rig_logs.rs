@@ -1,0 +1,306 @@
+//! Calibration logs as rigs write them: comment lines, tab and semicolon separators, dropped
+//! samples, a wrong separator, an encoder zero that is off, and logs that cover only part of
+//! the stroke. Every log here is simulated with known truth and then rewritten in the rig's
+//! form, so each test knows what the reader must recover.
+
+mod common;
+
+use camspring::estimate::log::{read_log, write_log, ColumnMap, Delimiter, LogError};
+use camspring::estimate::sim::{simulate, SimSettings};
+use common::camspring;
+
+fn spec_path(name: &str) -> String {
+    format!("{}/specs/{name}", env!("CARGO_MANIFEST_DIR"))
+}
+
+/// A 120 s simulated log of the paper spec's law as CSV text (t_s,force_n,position_mm).
+fn base_log() -> String {
+    let settings = SimSettings {
+        duration_s: 120.0,
+        seed: 11,
+        ..SimSettings::default()
+    };
+    let (log, _) = simulate(common::paper_law(), 20.0, 230.0, &settings).unwrap();
+    String::from_utf8(write_log(&log)).unwrap()
+}
+
+fn read(text: &str) -> Result<camspring::CalibrationLog, LogError> {
+    read_log(text.as_bytes(), &ColumnMap::default(), 0.1, |_| {})
+}
+
+#[test]
+fn comments_and_separators_of_rig_logs_read_the_same_samples() {
+    let text = base_log();
+    let reference = read(&text).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    // A comment header, a comment and a blank line inside the data, tab separators.
+    let mut tab = String::from("# rig 3, load cell LC-200, encoder 0.01 mm\n; firmware 2.1\n\n");
+    for (i, l) in lines.iter().enumerate() {
+        tab.push_str(&l.replace(',', "\t"));
+        tab.push('\n');
+        if i == 500 {
+            tab.push_str("# operator paused the log here\n\n");
+        }
+    }
+    let log = read(&tab).unwrap();
+    assert_eq!(log.t_s, reference.t_s);
+    assert_eq!(log.force_n, reference.force_n);
+    assert_eq!(log.position_mm, reference.position_mm);
+    // Semicolons, given explicitly.
+    let semi = text.replace(',', ";");
+    let map = ColumnMap {
+        delimiter: Delimiter::Semicolon,
+        ..ColumnMap::default()
+    };
+    let log = read_log(semi.as_bytes(), &map, 0.1, |_| {}).unwrap();
+    assert_eq!(log.position_mm, reference.position_mm);
+    // Line numbers are the file's, comments included: a bad number on data row 1000 of the
+    // tab file (3 comment lines, the header, 1000 rows and the 2 inserted lines before it).
+    let mut bad: Vec<String> = tab.lines().map(str::to_string).collect();
+    let row = 3 + 1 + 1000 + 2; // 1-based line of data row 1000
+    let fields: Vec<&str> = bad[row - 1].split('\t').collect();
+    bad[row - 1] = format!("{}\tten\t{}", fields[0], fields[2]);
+    let err = read(&(bad.join("\n") + "\n")).unwrap_err();
+    assert_eq!(err.line(), Some(row as u64), "{err}");
+    assert!(err.to_string().contains("\"ten\""), "{err}");
+}
+
+#[test]
+fn a_wrong_separator_is_named_in_the_message() {
+    let tab = base_log().replace(',', "\t");
+    let map = ColumnMap {
+        delimiter: Delimiter::Comma,
+        ..ColumnMap::default()
+    };
+    let err = read_log(tab.as_bytes(), &map, 0.1, |_| {}).unwrap_err();
+    let msg = err.to_string();
+    assert!(
+        msg.contains("line 1") && msg.contains("split at commas"),
+        "{msg}"
+    );
+    assert!(msg.contains("--delimiter"), "{msg}");
+    // A column that is really missing is named with the columns there are.
+    let err = read_log(
+        base_log().as_bytes(),
+        &ColumnMap {
+            force: camspring::estimate::log::parse_column(
+                "F",
+                camspring::units::Dimension::Force,
+                "force",
+            )
+            .unwrap(),
+            ..ColumnMap::default()
+        },
+        0.1,
+        |_| {},
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("no column \"F\"")
+            && err.contains("\"force_n\"")
+            && !err.contains("--delimiter"),
+        "{err}"
+    );
+}
+
+#[test]
+fn isolated_dropped_samples_are_filled_and_long_gaps_refused_with_their_times() {
+    let text = base_log();
+    let reference = read(&text).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    // Drop data rows 100 and 2000..2002 (one and three samples).
+    let keep = |i: usize| i != 101 && !(2001..=2003).contains(&i);
+    let dropped: String = lines
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| keep(*i))
+        .map(|(_, l)| format!("{l}\n"))
+        .collect();
+    let log = read(&dropped).unwrap();
+    assert_eq!(log.len(), reference.len());
+    assert_eq!(log.filled.len(), 2);
+    assert_eq!(
+        log.filled.iter().map(|g| g.samples).collect::<Vec<_>>(),
+        vec![1, 3]
+    );
+    // The filled samples lie between their neighbours (linear interpolation), on the grid.
+    let i = 100;
+    assert!((log.t_s[i] - reference.t_s[i]).abs() < 1e-9);
+    assert!(
+        (log.position_mm[i] - 0.5 * (reference.position_mm[i - 1] + reference.position_mm[i + 1]))
+            .abs()
+            < 1e-9
+    );
+    // Five in a row, twice: refused, both named with line and time.
+    let keep = |i: usize| !(301..=305).contains(&i) && !(5001..=5005).contains(&i);
+    let gappy: String = lines
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| keep(*i))
+        .map(|(_, l)| format!("{l}\n"))
+        .collect();
+    let err = read(&gappy).unwrap_err();
+    let LogError::Gaps { gaps } = &err else {
+        panic!("{err}")
+    };
+    assert_eq!(gaps.len(), 2);
+    assert_eq!(gaps[0].samples, 5);
+    assert!((gaps[0].after_s - reference.t_s[299]).abs() < 1e-9);
+    assert!(err.to_string().contains("line 302"), "{err}");
+}
+
+#[test]
+fn the_cli_reads_a_rig_log_and_warns_about_what_it_filled() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = base_log();
+    let lines: Vec<&str> = text.lines().collect();
+    let mut rig = String::from("# exported by RigLogger 4.2\n");
+    for (i, l) in lines.iter().enumerate() {
+        if i != 700 {
+            rig.push_str(&l.replace(',', ";"));
+            rig.push('\n');
+        }
+    }
+    std::fs::write(dir.path().join("rig.csv"), rig).unwrap();
+    let out = camspring(dir.path(), &["identify", "rig.csv"]);
+    assert_eq!(out.status.code(), Some(0));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("1 dropped sample(s)") && stderr.contains("before line 702"),
+        "{stderr}"
+    );
+}
+
+/// Writes `text` with every position moved by `shift_mm`, as an encoder zeroed off.
+fn shifted(text: &str, shift_mm: f64) -> String {
+    let mut out = String::new();
+    for (i, l) in text.lines().enumerate() {
+        if i == 0 {
+            out.push_str(l);
+        } else {
+            let f: Vec<&str> = l.split(',').collect();
+            let x: f64 = f[2].parse().unwrap();
+            out.push_str(&format!("{},{},{:.6}", f[0], f[1], x + shift_mm));
+        }
+        out.push('\n');
+    }
+    out
+}
+
+#[test]
+fn an_encoder_zero_off_by_half_a_millimetre_is_found_and_taken_out() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    assert_eq!(
+        camspring(
+            d,
+            &[
+                "simulate",
+                &spec_path("paper.toml"),
+                "-o",
+                "calib.csv",
+                "--seed",
+                "4"
+            ]
+        )
+        .status
+        .code(),
+        Some(0)
+    );
+    let text = std::fs::read_to_string(d.join("calib.csv")).unwrap();
+    std::fs::write(d.join("off.csv"), shifted(&text, 0.5)).unwrap();
+    let paper = spec_path("paper.toml");
+    // Against the law at 3 %, the shifted log fails...
+    let out = camspring(d, &["validate", &paper, "off.csv", "--tolerance", "3%"]);
+    assert_eq!(out.status.code(), Some(1));
+    // ...and passes once the zero is fitted, which is reported within 0.05 mm.
+    let out = camspring(
+        d,
+        &[
+            "validate",
+            &paper,
+            "off.csv",
+            "--tolerance",
+            "3%",
+            "--position-offset",
+            "auto",
+            "--json",
+        ],
+    );
+    assert_eq!(out.status.code(), Some(0));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let offset = v["position_offset_mm"].as_f64().unwrap();
+    assert!((offset - 0.5).abs() < 0.05, "{offset}");
+    // A given offset is applied as is.
+    let out = camspring(
+        d,
+        &[
+            "validate",
+            &paper,
+            "off.csv",
+            "--tolerance",
+            "3%",
+            "--position-offset",
+            "0.5mm",
+        ],
+    );
+    assert_eq!(out.status.code(), Some(0));
+    // estimate has no designed law to fit against unless it starts from one.
+    let out = camspring(d, &["estimate", "off.csv", "--position-offset", "auto"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--init SPEC"));
+}
+
+#[test]
+fn validate_says_what_part_of_the_stroke_the_log_covers() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    assert_eq!(
+        camspring(
+            d,
+            &[
+                "simulate",
+                &spec_path("paper.toml"),
+                "-o",
+                "calib.csv",
+                "--seed",
+                "2"
+            ]
+        )
+        .status
+        .code(),
+        Some(0)
+    );
+    let paper = spec_path("paper.toml");
+    let out = camspring(d, &["validate", &paper, "calib.csv", "--json"]);
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let c = &v["coverage"];
+    // The sines span 15 ... 85 % of the 20 mm stroke (70 %); the filter's window trims the ends.
+    let fraction = c["stroke_fraction"].as_f64().unwrap();
+    assert!((0.6..0.75).contains(&fraction), "{fraction}");
+    let coverage = v["criteria"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c["name"] == "coverage")
+        .unwrap();
+    assert_eq!(coverage["pass"], true);
+    // Only the lower 40 % of the stroke: the log fails on coverage, and says why.
+    let settings = camspring::estimate::sim::SimSettings {
+        duration_s: 120.0,
+        seed: 3,
+        ..camspring::estimate::sim::SimSettings::default()
+    };
+    // A law whose stroke is 20 mm, logged over a spring moved only over 0 ... 8 mm: simulate
+    // over an 8 mm stroke of the same law.
+    let (log, _) = simulate(common::paper_law(), 8.0, 230.0, &settings).unwrap();
+    std::fs::write(d.join("low.csv"), write_log(&log)).unwrap();
+    let out = camspring(d, &["validate", &paper, "low.csv"]);
+    assert_eq!(out.status.code(), Some(1));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("FAIL  coverage"), "{text}");
+    assert!(text.contains("warning: the log reaches only"), "{text}");
+    let html = std::fs::read_to_string(d.join("validation.html")).unwrap();
+    assert!(html.contains("Coverage: x =") && html.contains("Measured force against deflection"));
+}
