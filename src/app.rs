@@ -504,7 +504,7 @@ pub fn run_validate(
     svg: Option<&Path>,
 ) -> Result<(Verdict, PathBuf)> {
     use crate::render::calibration::{curve_validation_svg, validation_svg};
-    use crate::verdict::validate::{validate, validate_curve};
+    use crate::verdict::validate::validate_curve;
     let spec = load_spec(spec_path)?;
     let designed = designed_law(&spec)?;
     // By default the force is judged against the band of builds the design's tolerances
@@ -545,20 +545,42 @@ pub fn run_validate(
         .map_or(String::new(), |n| n.to_string_lossy().into_owned());
     let (verdict, svg_text, html) = match &designed {
         ForceLaw::Exponential(law) => {
-            let est = estimate_log(&log, opts, true)?;
-            let id = est
-                .identification
+            // A filter that diverges, or is not consistent on this log, does not judge:
+            // identification does.
+            let est = match estimate_log(&log, opts, true) {
+                Ok(est) => Some(est),
+                Err(Error::Estimate(crate::estimate::pipeline::EstimateError::Filter(e))) => {
+                    eprintln!("warning: {e}; k2 is judged from identification");
+                    None
+                }
+                Err(e) => return Err(e),
+            };
+            let identified;
+            let id = match &est {
+                Some(est) => est.identification.as_ref().ok_or_else(|| {
+                    Error::Argument("validate needs the identification init".into())
+                })?,
+                None => {
+                    identified = crate::estimate::identify::identify_with_window(
+                        &log,
+                        &opts.noise,
+                        opts.window_s,
+                    )?;
+                    &identified
+                }
+            };
+            let run = est
                 .as_ref()
-                .ok_or_else(|| Error::Argument("validate needs the identification init".into()))?;
-            let v = validate(
+                .filter(|e| e.consistency.consistent)
+                .map(|e| &e.run);
+            let mut v = crate::verdict::validate::validate_with(
                 law,
                 id,
-                &est.run,
+                run,
                 &log.position_mm,
                 tolerance,
                 band.as_ref(),
             );
-            let mut v = v;
             v.position_offset_mm = offset_mm;
             let (c, cov) = crate::verdict::validate::coverage(
                 &designed,
@@ -569,7 +591,6 @@ pub fn run_validate(
             v.pass &= c.pass;
             v.criteria.push(c);
             v.coverage = Some(cov);
-            let svg_text = validation_svg(&v, &est.run);
             // The measured force-deflection points come from the quasi-static curve.
             let points = validate_curve(&designed, &log, &opts.noise, tolerance, band.as_ref());
             let force_svg = crate::render::calibration::force_points_svg(
@@ -578,6 +599,10 @@ pub fn run_validate(
                 spec.law.xmax_mm(),
                 band.as_ref(),
             );
+            let svg_text = match &est {
+                Some(est) => validation_svg(&v, &est.run),
+                None => force_svg.clone(),
+            };
             let html = crate::render::html::validation_html(&v, &svg_text, &log_name, &force_svg);
             (Verdict::Law(v), svg_text, html)
         }

@@ -220,7 +220,25 @@ pub struct Identification {
     pub filter_bias_std: [f64; 7],
 }
 
+/// The precision the calibration of a spring law aims at: k2 within 0.5 % and mu within
+/// 1.5 %, each at two standard deviations (95 %).
+pub const TARGET_PRECISION: [(Param, f64); 2] = [(Param::K2, 0.005), (Param::Mu, 0.015)];
+
 impl Identification {
+    /// The law parameters whose two standard deviations exceed [`TARGET_PRECISION`], each
+    /// with its relative standard deviation and how many times longer a log of the same kind
+    /// would have to be to reach the target (the variance falls as 1 / duration).
+    pub fn imprecise(&self) -> Vec<(Param, f64, f64)> {
+        TARGET_PRECISION
+            .iter()
+            .filter_map(|&(p, target)| {
+                let e = self.get(p);
+                let rel = e.std? / e.value?.abs().max(1e-300);
+                (2.0 * rel > target).then(|| (p, rel, (2.0 * rel / target).powi(2)))
+            })
+            .collect()
+    }
+
     /// The estimate of a parameter.
     pub fn get(&self, p: Param) -> Estimate {
         self.parameters.get(p)
@@ -834,7 +852,7 @@ pub fn candidate_windows(n: usize, dt: f64) -> Vec<usize> {
 /// [`SHORTEST_WINDOW_S`] to [`LONGEST_WINDOW_S`] (ratio [`WINDOW_RATIO`]). Windows that
 /// do not fit the log ([`Adequacy`]), or that identify fewer parameters than the best (their
 /// corrected information on m, d2 or d1 is
-/// noise), or at which the velocity noise hides more than three quarters of the samples that move at
+/// noise), or at which the velocity noise hides more than half of the samples that move at
 /// the best window, are not compared: leaving out a force the log carries, or most of the
 /// motion, biases the rest. Among the
 /// others, in order of length, the chosen window is the longest whose every estimate agrees
@@ -878,7 +896,7 @@ pub fn choose_window(
         .max()
         .unwrap_or(0);
     let candidate = |id: &Identification| {
-        id.not_identifiable.len() == fewest_missing && 4 * id.dynamic_samples >= most_moving
+        id.not_identifiable.len() == fewest_missing && 2 * id.dynamic_samples >= most_moving
     };
     // Windows whose fit does not explain the log (too short for the kernels' conditioning, or
     // long enough to distort the motion) are left out, unless every window is such.

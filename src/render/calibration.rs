@@ -169,6 +169,10 @@ pub fn identification_json(
         "sg_window_samples": id.sg_window,
         "sg_window_s": id.sg_window_s,
         "window_choice": id.window_choice,
+        "imprecise": id.imprecise().iter().map(|(p, rel, longer)| json!({
+            "parameter": p.key(), "relative_std": rel, "log_length_factor_for_target": longer,
+        })).collect::<Vec<_>>(),
+        "filter_bias_std": id.filter_bias_std,
         "fit": {
             "status": id.adequacy.status,
             "reduced_chi2": id.adequacy.reduced_chi2,
@@ -249,6 +253,17 @@ pub fn format_identification(id: &Identification) -> String {
          quasi-static samples alone {:.5} 1/mm",
         id.residual_rms_n, id.reduced_chi2, id.condition_number, id.k2_quasi_static_per_mm
     );
+    for (p, rel, longer) in id.imprecise() {
+        let _ = writeln!(
+            s,
+            "warning: {} is determined only to +-{:.2} % (1 sigma) by this log; the calibration target \
+             (k2 within 0.5 %, mu within 1.5 %, at 2 sigma) needs a log about {:.1} times longer, or \
+             one that covers more of the stroke",
+            p.key(),
+            100.0 * rel,
+            longer
+        );
+    }
     match &id.adequacy.whiteness {
         Some(w) => {
             let _ = writeln!(
@@ -427,10 +442,15 @@ pub fn format_validation(v: &Validation) -> String {
     s.push_str(&criteria_lines(&v.criteria));
     let _ = writeln!(
         s,
-        "  identified F = {:.6} N * exp({:.6} /mm * x) + {:.6} N; EKF k2 = {:.6} +- {:.6} /mm",
+        "  identified F = {:.6} N * exp({:.6} /mm * x) + {:.6} N; {} k2 = {:.6} +- {:.6} /mm",
         v.identified.mu_n,
         v.identified.k2_per_mm,
         v.identified.f0_n,
+        if v.ekf_consistent {
+            "EKF"
+        } else {
+            "identified (the EKF was not consistent on this log)"
+        },
         v.ekf_k2_per_mm,
         v.ekf_k2_per_mm_std
     );

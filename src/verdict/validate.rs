@@ -126,8 +126,10 @@ pub struct Validation {
     pub designed: ExpLaw,
     /// The identified law (offline).
     pub identified: ExpLaw,
-    /// The EKF's final k2 (1/mm).
+    /// The EKF's final k2 (1/mm); identification's when the EKF was not consistent.
     pub ekf_k2_per_mm: f64,
+    /// Whether the EKF was consistent on this log and judged k2 and the stiffness line.
+    pub ekf_consistent: bool,
     /// Its standard deviation (1/mm).
     pub ekf_k2_per_mm_std: f64,
     /// Smallest deflection in the log (mm).
@@ -153,6 +155,20 @@ pub fn validate(
     tolerance: f64,
     band: Option<&ForceBand>,
 ) -> Validation {
+    validate_with(designed, id, Some(run), positions_mm, tolerance, band)
+}
+
+/// [`validate`] with the EKF run optional: without one (the filter was not consistent on this
+/// log), k2 is judged from identification, and the stiffness line, which needs the filter's
+/// stiffness, is not judged.
+pub fn validate_with(
+    designed: &ExpLaw,
+    id: &Identification,
+    run: Option<&EkfRun>,
+    positions_mm: &[f64],
+    tolerance: f64,
+    band: Option<&ForceBand>,
+) -> Validation {
     let value = |p: Param| id.get(p).value;
     let identified = ExpLaw {
         mu_n: value(Param::Mu).unwrap_or(f64::NAN),
@@ -170,27 +186,41 @@ pub fn validate(
             pass: deviation.is_finite() && deviation <= tol,
         })
     };
-    let last = run.last.z;
-    let k2_std = run.last.std()[idx::K2];
-    add(
-        "k2",
-        "EKF exponent rate k2 against the design",
-        100.0 * (last[idx::K2] / designed.k2_per_mm - 1.0).abs(),
-    );
+    let (k2, k2_std) = match run {
+        Some(run) => {
+            add(
+                "k2",
+                "EKF exponent rate k2 against the design",
+                100.0 * (run.last.z[idx::K2] / designed.k2_per_mm - 1.0).abs(),
+            );
+            (run.last.z[idx::K2], run.last.std()[idx::K2])
+        }
+        None => {
+            let k2 = id.get(Param::K2);
+            add(
+                "k2",
+                "identified exponent rate k2 against the design (the EKF was not consistent on this log)",
+                100.0 * (identified.k2_per_mm / designed.k2_per_mm - 1.0).abs(),
+            );
+            (identified.k2_per_mm, k2.std.unwrap_or(f64::NAN))
+        }
+    };
     // Stiffness against force over the converged half.
-    let n = run.states.len();
-    let (mut num, mut den) = (0.0, 0.0);
-    for (z, off) in run.states[n / 2..].iter().zip(&run.offsets[n / 2..]) {
-        let force = spring_force_n(z, off);
-        let line = designed.k2_per_mm * (force - designed.f0_n);
-        num += (z[idx::SIGMA] - line).powi(2);
-        den += line * line;
+    if let Some(run) = run {
+        let n = run.states.len();
+        let (mut num, mut den) = (0.0, 0.0);
+        for (z, off) in run.states[n / 2..].iter().zip(&run.offsets[n / 2..]) {
+            let force = spring_force_n(z, off);
+            let line = designed.k2_per_mm * (force - designed.f0_n);
+            num += (z[idx::SIGMA] - line).powi(2);
+            den += line * line;
+        }
+        add(
+            "stiffness_force_line",
+            "RMS of estimated stiffness against the designed line sigma = k2 (F - F0)",
+            100.0 * (num / den.max(1e-300)).sqrt(),
+        );
     }
-    add(
-        "stiffness_force_line",
-        "RMS of estimated stiffness against the designed line sigma = k2 (F - F0)",
-        100.0 * (num / den.max(1e-300)).sqrt(),
-    );
     // Force-deflection over the measured range.
     let (lo, hi) = positions_mm
         .iter()
@@ -231,8 +261,9 @@ pub fn validate(
         criteria,
         designed: *designed,
         identified,
-        ekf_k2_per_mm: last[idx::K2],
+        ekf_k2_per_mm: k2,
         ekf_k2_per_mm_std: k2_std,
+        ekf_consistent: run.is_some(),
         range_min_mm: lo,
         range_max_mm: hi,
         band_exits,

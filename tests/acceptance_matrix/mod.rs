@@ -9,7 +9,7 @@ use std::fmt;
 use camspring::estimate::identify::{Identification, Param};
 use camspring::estimate::sim::{simulate, Dynamics, Profile, SimSettings};
 use camspring::model::ExpLaw;
-use camspring::verdict::validate::validate;
+use camspring::verdict::validate::validate_with;
 use camspring::{estimate, EstimateOptions, SensorNoise};
 
 /// Stroke of the simulated spring (mm).
@@ -90,6 +90,8 @@ pub struct Outcome {
     pub worst_z: (f64, &'static str),
     /// Identification's own verdict on the fit (None: it fits).
     pub does_not_fit: Option<String>,
+    /// Identification says k2 or mu is not precise enough for the target (a warning).
+    pub imprecise: bool,
     pub not_identifiable: Vec<String>,
     pub window_s: f64,
     pub reduced_chi2: f64,
@@ -113,6 +115,7 @@ impl Outcome {
     pub fn identify_ok(&self) -> bool {
         self.error.is_none()
             && (self.does_not_fit.is_some()
+                || (self.imprecise && self.worst_z.0 < 3.0)
                 || (self.k2_error.abs() < 0.005
                     && self.mu_error.abs() < 0.015
                     && self.worst_z.0 < 3.0))
@@ -144,7 +147,7 @@ impl fmt::Display for Outcome {
         }
         write!(
             f,
-            "w {:.2}s chi2 {:.2} k2 {:+.3}% mu {:+.2}% worst |z| {:.1} ({}) drop {:?}{} ",
+            "w {:.2}s chi2 {:.2} k2 {:+.3}% mu {:+.2}% worst |z| {:.1} ({}) drop {:?}{}{} ",
             self.window_s,
             self.reduced_chi2,
             100.0 * self.k2_error,
@@ -152,6 +155,7 @@ impl fmt::Display for Outcome {
             self.worst_z.0,
             self.worst_z.1,
             self.not_identifiable,
+            if self.imprecise { " IMPRECISE" } else { "" },
             match &self.does_not_fit {
                 Some(r) => format!(" DOES NOT FIT: {r}"),
                 None => String::new(),
@@ -201,6 +205,7 @@ pub fn run_case(case: &Case) -> Outcome {
         mu_error: f64::NAN,
         worst_z: (0.0, ""),
         does_not_fit: None,
+        imprecise: false,
         not_identifiable: Vec::new(),
         window_s: 0.0,
         reduced_chi2: f64::NAN,
@@ -244,6 +249,15 @@ pub fn run_case(case: &Case) -> Outcome {
                 Ok(id) => {
                     record_identification(&mut outcome, &id, &law, case);
                     outcome.ekf = Err(e.to_string());
+                    // As `camspring validate` does: identification judges.
+                    let off = ExpLaw {
+                        k2_per_mm: 1.05 * law.k2_per_mm,
+                        ..law
+                    };
+                    outcome.validate_true =
+                        validate_with(&law, &id, None, &log.position_mm, 0.03, None).pass;
+                    outcome.validate_off =
+                        validate_with(&off, &id, None, &log.position_mm, 0.03, None).pass;
                 }
                 Err(e) => outcome.error = Some(e.to_string()),
             }
@@ -270,8 +284,10 @@ pub fn run_case(case: &Case) -> Outcome {
         k2_per_mm: 1.05 * law.k2_per_mm,
         ..law
     };
-    outcome.validate_true = validate(&law, id, &run.run, &log.position_mm, 0.03, None).pass;
-    outcome.validate_off = validate(&off, id, &run.run, &log.position_mm, 0.03, None).pass;
+    // As `camspring validate` does: a filter that is not consistent does not judge.
+    let ekf = run.consistency.consistent.then_some(&run.run);
+    outcome.validate_true = validate_with(&law, id, ekf, &log.position_mm, 0.03, None).pass;
+    outcome.validate_off = validate_with(&off, id, ekf, &log.position_mm, 0.03, None).pass;
     outcome
 }
 
@@ -290,6 +306,7 @@ fn record_identification(o: &mut Outcome, id: &Identification, law: &ExpLaw, cas
     o.reduced_chi2 = id.reduced_chi2;
     o.not_identifiable = id.not_identifiable.clone();
     o.does_not_fit = id.adequacy.problem();
+    o.imprecise = !id.imprecise().is_empty();
     if let Some(k2) = id.get(Param::K2).value {
         o.k2_error = k2 / law.k2_per_mm - 1.0;
     }
