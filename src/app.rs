@@ -543,6 +543,10 @@ pub fn run_validate(
     let log_name = log_path
         .file_name()
         .map_or(String::new(), |n| n.to_string_lossy().into_owned());
+    // Every verdict also states, and judges, what part of the designed stroke the log covers.
+    let judge_coverage = |lo: f64, hi: f64| {
+        crate::verdict::validate::coverage(&designed, lo, hi, spec.law.xmax_mm())
+    };
     let (verdict, svg_text, html) = match &designed {
         ForceLaw::Exponential(law) => {
             // A filter that diverges, or is not consistent on this log, does not judge:
@@ -582,12 +586,7 @@ pub fn run_validate(
                 band.as_ref(),
             );
             v.position_offset_mm = offset_mm;
-            let (c, cov) = crate::verdict::validate::coverage(
-                &designed,
-                v.range_min_mm,
-                v.range_max_mm,
-                spec.law.xmax_mm(),
-            );
+            let (c, cov) = judge_coverage(v.range_min_mm, v.range_max_mm);
             v.pass &= c.pass;
             v.criteria.push(c);
             v.coverage = Some(cov);
@@ -609,12 +608,7 @@ pub fn run_validate(
         ForceLaw::Table(_) | ForceLaw::Polynomial(_) => {
             let mut v = validate_curve(&designed, &log, &opts.noise, tolerance, band.as_ref());
             v.position_offset_mm = offset_mm;
-            let (c, cov) = crate::verdict::validate::coverage(
-                &designed,
-                v.range_min_mm,
-                v.range_max_mm,
-                spec.law.xmax_mm(),
-            );
+            let (c, cov) = judge_coverage(v.range_min_mm, v.range_max_mm);
             v.pass &= c.pass;
             v.criteria.push(c);
             v.coverage = Some(cov);

@@ -172,6 +172,20 @@ fn the_cli_reads_a_rig_log_and_warns_about_what_it_filled() {
     );
 }
 
+/// Simulates the paper spec's default run into `dir/calib.csv` with `seed`.
+fn simulate_paper(dir: &std::path::Path, seed: &str) {
+    let paper = spec_path("paper.toml");
+    let args = [
+        "simulate",
+        paper.as_str(),
+        "-o",
+        "calib.csv",
+        "--seed",
+        seed,
+    ];
+    assert_eq!(camspring(dir, &args).status.code(), Some(0));
+}
+
 /// Writes `text` with every position moved by `shift_mm`, as an encoder zeroed off.
 fn shifted(text: &str, shift_mm: f64) -> String {
     let mut out = String::new();
@@ -192,22 +206,7 @@ fn shifted(text: &str, shift_mm: f64) -> String {
 fn an_encoder_zero_off_by_half_a_millimetre_is_found_and_taken_out() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    assert_eq!(
-        camspring(
-            d,
-            &[
-                "simulate",
-                &spec_path("paper.toml"),
-                "-o",
-                "calib.csv",
-                "--seed",
-                "4"
-            ]
-        )
-        .status
-        .code(),
-        Some(0)
-    );
+    simulate_paper(d, "4");
     let text = std::fs::read_to_string(d.join("calib.csv")).unwrap();
     std::fs::write(d.join("off.csv"), shifted(&text, 0.5)).unwrap();
     let paper = spec_path("paper.toml");
@@ -256,22 +255,7 @@ fn an_encoder_zero_off_by_half_a_millimetre_is_found_and_taken_out() {
 fn validate_says_what_part_of_the_stroke_the_log_covers() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    assert_eq!(
-        camspring(
-            d,
-            &[
-                "simulate",
-                &spec_path("paper.toml"),
-                "-o",
-                "calib.csv",
-                "--seed",
-                "2"
-            ]
-        )
-        .status
-        .code(),
-        Some(0)
-    );
+    simulate_paper(d, "2");
     let paper = spec_path("paper.toml");
     let out = camspring(d, &["validate", &paper, "calib.csv", "--json"]);
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();

@@ -469,17 +469,7 @@ fn coverage_lines(c: Option<&crate::verdict::validate::Coverage>, offset: Option
         );
     }
     if let Some(c) = c {
-        let _ = writeln!(
-            s,
-            "  coverage: x = {:.2} ... {:.2} mm, {:.0} % of the {:.2} mm stroke; designed force {:.1} ... {:.1} N of Fmax {:.1} N",
-            c.from_mm,
-            c.to_mm,
-            100.0 * c.stroke_fraction,
-            c.xmax_mm,
-            c.force_from_n,
-            c.force_to_n,
-            c.fmax_n
-        );
+        let _ = writeln!(s, "  coverage: {}", c.summary());
         for w in &c.warnings {
             let _ = writeln!(s, "warning: {w}");
         }

@@ -459,18 +459,7 @@ fn coverage_paragraph(
         );
     }
     if let Some(c) = c {
-        let _ = writeln!(
-            h,
-            "<p>Coverage: x = {:.2} to {:.2} mm, {:.0} % of the {:.2} mm stroke; designed force \
-             {:.1} to {:.1} N of F<sub>max</sub> {:.1} N.</p>",
-            c.from_mm,
-            c.to_mm,
-            100.0 * c.stroke_fraction,
-            c.xmax_mm,
-            c.force_from_n,
-            c.force_to_n,
-            c.fmax_n
-        );
+        let _ = writeln!(h, "<p>Coverage: {}.</p>", escape(&c.summary()));
         for w in &c.warnings {
             let _ = writeln!(
                 h,

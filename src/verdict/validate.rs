@@ -501,6 +501,22 @@ pub struct Coverage {
     pub warnings: Vec<String>,
 }
 
+impl Coverage {
+    /// One sentence: the deflections and designed forces covered (for the text and the page).
+    pub fn summary(&self) -> String {
+        format!(
+            "x = {:.2} ... {:.2} mm, {:.0} % of the {:.2} mm stroke; designed force {:.1} ... {:.1} N of Fmax {:.1} N",
+            self.from_mm,
+            self.to_mm,
+            100.0 * self.stroke_fraction,
+            self.xmax_mm,
+            self.force_from_n,
+            self.force_to_n,
+            self.fmax_n
+        )
+    }
+}
+
 /// The coverage of a log spanning `lo ..= hi` (mm) of a law designed over `0 ..= xmax_mm`, and
 /// its criterion: a log that covers less than [`MIN_STROKE_COVERED`] of the stroke fails
 /// (`coverage`, the uncovered share against its tolerance); one whose designed force never

@@ -1,0 +1,247 @@
+//! The Savitzky-Golay window of identification, chosen from the data by the balancing
+//! principle ([`choose_window`]), and the filter's remaining bias added to the reported
+//! variances.
+
+use serde::Serialize;
+
+use super::adequacy::FitStatus;
+use super::identify::{fit, Estimates, Identification, IdentifyError, Param, SensorNoise};
+use super::log::CalibrationLog;
+use super::sg::{self, Differentiator};
+
+/// Shortest window tried by [`choose_window`] (s).
+pub const SHORTEST_WINDOW_S: f64 = 0.1;
+
+/// Fewest samples in a window tried by [`choose_window`]: the quintic kernels fitted to half
+/// the window's offsets are poorly conditioned on fewer.
+pub const SHORTEST_WINDOW_SAMPLES: usize = 15;
+
+/// Longest window tried by [`choose_window`] (s).
+pub const LONGEST_WINDOW_S: f64 = 6.4;
+
+/// Ratio between neighbouring windows tried by [`choose_window`].
+pub const WINDOW_RATIO: f64 = std::f64::consts::SQRT_2;
+
+/// How many combined standard deviations two windows' estimates may differ by before
+/// [`choose_window`] takes the longer one as distorted.
+pub const BALANCING_SIGMAS: f64 = 3.0;
+
+/// How the Savitzky-Golay window was chosen.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum WindowMethod {
+    /// Given by the user (`--window`).
+    Given,
+    /// Chosen from the data by the balancing principle ([`choose_window`]).
+    Balancing,
+}
+
+/// One window tried by [`choose_window`].
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct WindowCandidate {
+    /// Window (s).
+    pub window_s: f64,
+    /// Window (samples).
+    pub window_samples: usize,
+    /// The fit's k2 (1/mm), when it succeeded.
+    pub k2_per_mm: Option<f64>,
+    /// Reduced chi-square of the fit.
+    pub reduced_chi2: Option<f64>,
+    /// Parameters that this window could not identify.
+    pub not_identifiable: Vec<String>,
+    /// Whether the window identifies as many parameters as the best one (only those are
+    /// compared).
+    pub admissible: bool,
+    /// Why the fit failed, if it did.
+    pub error: Option<String>,
+}
+
+/// The window choice, with every candidate tried.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct WindowChoice {
+    /// How the window was chosen.
+    pub method: WindowMethod,
+    /// Every window tried (empty when given).
+    pub candidates: Vec<WindowCandidate>,
+}
+
+/// The windows (samples, odd) that [`choose_window`] tries for a log of `n` samples every `dt`.
+pub fn candidate_windows(n: usize, dt: f64) -> Vec<usize> {
+    let longest = (LONGEST_WINDOW_S / dt).min(n as f64 / 4.0);
+    let mut out: Vec<usize> = Vec::new();
+    let mut w = (SHORTEST_WINDOW_S / dt).max(SHORTEST_WINDOW_SAMPLES as f64);
+    while w <= longest {
+        let k = (w.round() as usize) | 1;
+        if out.last() != Some(&k) {
+            out.push(k);
+        }
+        w *= WINDOW_RATIO;
+    }
+    out
+}
+
+/// Chooses the Savitzky-Golay window from the data by the balancing principle (Lepski's
+/// method) and returns the identification at that window.
+///
+/// A short window passes much position noise into the velocity and acceleration, so the
+/// estimates are unbiased (the errors-in-variables correction) but noisy; a long one lowers the
+/// noise but distorts the motion, which biases them. The fit is made at windows from
+/// [`SHORTEST_WINDOW_S`] to [`LONGEST_WINDOW_S`] (ratio [`WINDOW_RATIO`]). Windows that
+/// do not fit the log ([`Adequacy`]), or that identify fewer parameters than the best (their
+/// corrected information on m, d2 or d1 is
+/// noise), or at which the velocity noise hides more than half of the samples that move at
+/// the best window, are not compared: leaving out a force the log carries, or most of the
+/// motion, biases the rest. Among the
+/// others, in order of length, the chosen window is the longest whose every estimate agrees
+/// with the estimate of every shorter window within [`BALANCING_SIGMAS`] standard deviations
+/// of their difference, taken as sqrt(s_short^2 - s_long^2) (at least half of s_short): the
+/// longer window's estimate is the more precise, and the difference of two estimates of the
+/// same quantity has about that spread.
+pub fn choose_window(
+    log: &CalibrationLog,
+    noise: &SensorNoise,
+) -> Result<Identification, IdentifyError> {
+    let dt = log.dt_s();
+    let windows = candidate_windows(log.len(), dt);
+    if windows.is_empty() {
+        // Too short a log for the shortest window: the fixed-window fit says why.
+        return fit(log, noise, &Differentiator::new(sg::MIN_WINDOW));
+    }
+    let fits: Vec<Result<Identification, IdentifyError>> = windows
+        .iter()
+        .map(|&w| fit(log, noise, &Differentiator::new(w)))
+        .collect();
+    let fewest_missing = fits
+        .iter()
+        .filter_map(|f| f.as_ref().ok())
+        .map(|id| id.not_identifiable.len())
+        .min();
+    let Some(fewest_missing) = fewest_missing else {
+        // Every window failed: report the failure at the shortest one.
+        return fits
+            .into_iter()
+            .next()
+            .unwrap_or_else(|| fit(log, noise, &Differentiator::new(sg::MIN_WINDOW)));
+    };
+    // The most samples that move at a window whose fit explains the log (a distorted fit at a
+    // long window can count more).
+    let most_moving = fits
+        .iter()
+        .filter_map(|f| f.as_ref().ok())
+        .filter(|id| id.adequacy.status == FitStatus::Fits)
+        .map(|id| id.dynamic_samples)
+        .max()
+        .unwrap_or(0);
+    let candidate = |id: &Identification| {
+        id.not_identifiable.len() == fewest_missing && 2 * id.dynamic_samples >= most_moving
+    };
+    // Windows whose fit does not explain the log (too short for the kernels' conditioning, or
+    // long enough to distort the motion) are left out, unless every window is such.
+    let any_fits = fits
+        .iter()
+        .filter_map(|f| f.as_ref().ok())
+        .any(|id| candidate(id) && id.adequacy.status == FitStatus::Fits);
+    let admissible: Vec<usize> = (0..fits.len())
+        .filter(|&i| {
+            fits[i].as_ref().is_ok_and(|id| {
+                candidate(id) && (!any_fits || id.adequacy.status == FitStatus::Fits)
+            })
+        })
+        .collect();
+    if admissible.is_empty() {
+        return Err(IdentifyError::NoConvergence(
+            "no window was admissible".into(),
+        ));
+    }
+    let mut chosen = admissible[0];
+    'longer: for (j, &long) in admissible.iter().enumerate().skip(1) {
+        let Ok(b) = &fits[long] else { continue };
+        for &short in &admissible[..j] {
+            let Ok(a) = &fits[short] else { continue };
+            if !agree(a, b) {
+                break 'longer;
+            }
+        }
+        chosen = long;
+    }
+    let candidates = windows
+        .iter()
+        .zip(&fits)
+        .enumerate()
+        .map(|(i, (&w, f))| WindowCandidate {
+            window_s: w as f64 * dt,
+            window_samples: w,
+            k2_per_mm: f.as_ref().ok().and_then(|id| id.get(Param::K2).value),
+            reduced_chi2: f.as_ref().ok().map(|id| id.reduced_chi2),
+            not_identifiable: f
+                .as_ref()
+                .map(|id| id.not_identifiable.clone())
+                .unwrap_or_default(),
+            admissible: admissible.contains(&i),
+            error: f.as_ref().err().map(|e| e.to_string()),
+        })
+        .collect();
+    // The next shorter admissible window, whose estimates bound the filter's bias at the
+    // chosen one.
+    let shorter = admissible
+        .iter()
+        .rev()
+        .find(|&&i| i < chosen)
+        .and_then(|&i| fits[i].as_ref().ok())
+        .map(|id| id.parameters);
+    let mut id = fits
+        .into_iter()
+        .nth(chosen)
+        .and_then(Result::ok)
+        .ok_or_else(|| IdentifyError::NoConvergence("no window was chosen".into()))?;
+    if let Some(shorter) = shorter {
+        add_filter_bias(&mut id, &shorter);
+    }
+    id.window_choice = WindowChoice {
+        method: WindowMethod::Balancing,
+        candidates,
+    };
+    Ok(id)
+}
+
+/// Adds an estimate of the filter's bias to the chosen window's variances.
+///
+/// The distortion of a Savitzky-Golay filter grows as a high power of its window, so most of the
+/// bias at the chosen window shows as the change from the next shorter one. That change also
+/// carries noise, of variance about s_short^2 - s_chosen^2; what exceeds it,
+/// max(0, change^2 - (s_short^2 - s_chosen^2)), is counted as systematic and added to the
+/// parameter's variance (`filter_bias_std`). On a log the filter follows, it is zero on average.
+fn add_filter_bias(id: &mut Identification, shorter: &Estimates) {
+    let names = id.covariance_parameters.clone();
+    for p in Param::ALL {
+        let (a, b) = (shorter.get(p), id.get(p));
+        let (Some(va), Some(sa), Some(vb), Some(sb)) = (a.value, a.std, b.value, b.std) else {
+            continue;
+        };
+        let noise = (sa * sa - sb * sb).max(0.0);
+        let systematic = ((va - vb).powi(2) - noise).max(0.0);
+        if systematic == 0.0 {
+            continue;
+        }
+        id.filter_bias_std[p.index()] = systematic.sqrt();
+        id.parameters.set_std(p, (sb * sb + systematic).sqrt());
+        if let Some(k) = names.iter().position(|n| n == p.key()) {
+            id.covariance[k][k] += systematic;
+        }
+    }
+}
+
+/// Whether every parameter that both fits identify agrees within [`BALANCING_SIGMAS`]
+/// standard deviations of the difference (`short` at the shorter window).
+fn agree(short: &Identification, long: &Identification) -> bool {
+    Param::ALL.into_iter().all(|p| {
+        let (a, b) = (short.get(p), long.get(p));
+        match (a.value, a.std, b.value, b.std) {
+            (Some(va), Some(sa), Some(vb), Some(sb)) => {
+                let spread = (sa * sa - sb * sb).max(0.25 * sa * sa).sqrt();
+                (va - vb).abs() <= BALANCING_SIGMAS * spread
+            }
+            _ => true,
+        }
+    })
+}
