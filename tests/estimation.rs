@@ -251,3 +251,34 @@ fn divergence_stops_with_the_sample_index() {
     let err = estimate_log(&log, &opts, false).unwrap_err().to_string();
     assert!(err.contains("diverged at sample 60"), "{err}");
 }
+
+/// The filter's reported standard deviations of M and k2 match its errors over seeds (the RMS
+/// of the z-scores near 1); d2's do not yet (docs/CALIBRATION.md).
+#[test]
+fn reported_standard_deviations_of_m_and_k2_match_the_errors_over_seeds() {
+    use rayon::prelude::*;
+    let law = common::paper_law();
+    let d = heavy();
+    let z: Vec<[f64; 2]> = (0..12u64)
+        .into_par_iter()
+        .map(|seed| {
+            let (log, _) = sim(&law, Profile::Sines, 300.0, 100 + seed, Noise::default());
+            let est =
+                estimate_log(&log, &options(Noise::default(), Discretization::Rk4), false).unwrap();
+            assert!(est.consistency.consistent, "{:?}", est.consistency);
+            let (z, s) = (est.run.last.z, est.run.last.std());
+            [
+                (z[idx::M] - d.m_n_s2_per_mm) / s[idx::M],
+                (z[idx::K2] - law.k2_per_mm) / s[idx::K2],
+            ]
+        })
+        .collect();
+    for (k, name) in ["M", "k2"].iter().enumerate() {
+        let rms = (z.iter().map(|z| z[k] * z[k]).sum::<f64>() / z.len() as f64).sqrt();
+        let worst = z.iter().map(|z| z[k].abs()).fold(0.0, f64::max);
+        eprintln!("{name}: RMS z {rms:.2}, worst {worst:.2}");
+        // For 12 honest z-scores the RMS lies in 0.6 ... 1.4 with about 95 % probability.
+        assert!((0.5..1.6).contains(&rms), "{name}: RMS z {rms}");
+        assert!(worst < 3.5, "{name}: worst |z| {worst}");
+    }
+}

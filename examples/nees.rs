@@ -1,0 +1,104 @@
+//! The EKF's normalised estimation error squared (NEES) of its constants [M, k2, d2] over many
+//! simulated runs: e^T P^-1 e at the end of each run, whose mean over N runs of a consistent
+//! filter lies in the 95 % band of chi-square(3 N) / N.
+//!
+//! Run: `cargo run --release --example nees [seeds] [m d0 d1 d2] [sines|steps|ramp-hold] [speed]`.
+
+use camspring::estimate::ekf::idx;
+use camspring::estimate::sim::{simulate, Dynamics, Profile, SimSettings};
+use camspring::model::ExpLaw;
+use camspring::{estimate, EstimateOptions, SensorNoise};
+use nalgebra::{Matrix3, Vector3};
+use rayon::prelude::*;
+use statrs::distribution::{ChiSquared, ContinuousCDF};
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let a: Vec<String> = std::env::args().collect();
+    let f = |i: usize, d: f64| a.get(i).and_then(|s| s.parse().ok()).unwrap_or(d);
+    let seeds = f(1, 20.0) as u64;
+    let dynamics = Dynamics {
+        m_n_s2_per_mm: f(2, 0.05),
+        d0_n: f(3, 0.0),
+        d1_n_s_per_mm: f(4, 0.2),
+        d2_n_s3_per_mm3: f(5, -1e-4),
+    };
+    let profile = match a.get(6).map(String::as_str) {
+        Some("steps") => Profile::Steps,
+        Some("ramp-hold") => Profile::RampHold,
+        _ => Profile::Sines,
+    };
+    let law = ExpLaw {
+        mu_n: 1.1,
+        k2_per_mm: 0.24,
+        f0_n: 2.0 + 2.5 * dynamics.d0_n,
+    };
+    let results: Vec<Option<(f64, [f64; 3], bool)>> = (0..seeds)
+        .into_par_iter()
+        .map(|seed| {
+            let settings = SimSettings {
+                profile,
+                seed,
+                speed: f(7, 1.0),
+                dynamics,
+                ..SimSettings::default()
+            };
+            let (log, _) = simulate(law, 15.0, 500.0, &settings).ok()?;
+            let run = estimate(
+                &log,
+                &EstimateOptions::new(SensorNoise::default()),
+                |_, _| {},
+            )
+            .ok()?;
+            let z = run.run.last.z;
+            let p = run.run.last.p;
+            let ids = [idx::M, idx::K2, idx::D2];
+            let truth = [
+                dynamics.m_n_s2_per_mm,
+                law.k2_per_mm,
+                dynamics.d2_n_s3_per_mm3,
+            ];
+            // Held states (no variance) are left out of the NEES.
+            let free: Vec<usize> = (0..3).filter(|&i| p[(ids[i], ids[i])] > 0.0).collect();
+            let e = Vector3::from_fn(|i, _| z[ids[i]] - truth[i]);
+            let cov = Matrix3::from_fn(|i, j| p[(ids[i], ids[j])]);
+            let sub_e = nalgebra::DVector::from_iterator(free.len(), free.iter().map(|&i| e[i]));
+            let sub_p =
+                nalgebra::DMatrix::from_fn(free.len(), free.len(), |a, b| cov[(free[a], free[b])]);
+            let nees = sub_p.cholesky()?.solve(&sub_e).dot(&sub_e) / free.len() as f64 * 3.0;
+            let zs = [0, 1, 2].map(|i| {
+                if cov[(i, i)] > 0.0 {
+                    e[i] / cov[(i, i)].sqrt()
+                } else {
+                    f64::NAN
+                }
+            });
+            Some((nees, zs, run.consistency.consistent))
+        })
+        .collect();
+    let ok: Vec<_> = results.iter().flatten().collect();
+    let n = ok.len();
+    let mean = ok.iter().map(|r| r.0).sum::<f64>() / n as f64;
+    let chi = ChiSquared::new(3.0 * n as f64)?;
+    let (lo, hi) = (
+        chi.inverse_cdf(0.025) / n as f64,
+        chi.inverse_cdf(0.975) / n as f64,
+    );
+    println!(
+        "{n} runs ({} consistent): mean NEES of [M, k2, d2] {mean:.2}, 95 % band {lo:.2} ... {hi:.2}",
+        ok.iter().filter(|r| r.2).count()
+    );
+    for (i, name) in ["M", "k2", "d2"].iter().enumerate() {
+        let z: Vec<f64> = ok
+            .iter()
+            .map(|r| r.1[i])
+            .filter(|z| z.is_finite())
+            .collect();
+        let worst = z.iter().map(|z| z.abs()).fold(0.0, f64::max);
+        let rms = (z.iter().map(|z| z * z).sum::<f64>() / z.len().max(1) as f64).sqrt();
+        println!(
+            "  {name}: estimated in {} runs (held in the others), RMS z {rms:.2}, worst |z| {worst:.2}",
+            z.len()
+        );
+    }
+    Ok(())
+}
