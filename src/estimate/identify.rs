@@ -1,8 +1,9 @@
 //! Offline identification (paper section V): k2 by non-linear least squares, then
 //! X = [m, d0, d1, d2, mu, F0] by weighted least squares (eqs. 16-18), then a joint refinement.
 //!
-//! 1. Position, velocity and acceleration come from cubic Savitzky-Golay kernels over about
-//!    0.4 s with mutually uncorrelated noise ([`super::sg`]).
+//! 1. Position, velocity and acceleration come from quintic Savitzky-Golay kernels with mutually
+//!    uncorrelated noise ([`super::sg`]), over a window chosen from the data
+//!    ([`super::window::choose_window`]).
 //! 2. k2: Gauss-Newton with backtracking line search on F = mu*exp(k2 x) + F0 over the
 //!    quasi-static samples (|xd| below 10 % of its maximum), started from the best of a
 //!    log-spaced grid of k2 with (mu, F0) solved linearly for each.
@@ -26,6 +27,9 @@
 //! Poor excitation: the normal matrix is scaled to unit diagonal. While its smallest eigenvalue
 //! is below [`IDENTIFIABILITY_LIMIT`] times the largest, the parameter dominating that
 //! eigenvector is removed and reported as not identifiable, instead of printed as a number.
+//!
+//! Every fit is judged ([`super::adequacy`]): a reduced chi-square far from 1 or coloured
+//! residuals make it "does not fit", never a clean-looking result.
 
 use nalgebra::{DMatrix, DVector, SMatrix, SVector, SymmetricEigen};
 use serde::Serialize;

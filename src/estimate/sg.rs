@@ -1,7 +1,8 @@
 //! Savitzky-Golay smoothing differentiators: position, velocity and acceleration from local
 //! least-squares polynomials over a sliding window (cubic by default).
 //!
-//! The window is chosen from the sampling rate: [`window_for_rate`] gives about 0.4 s of data
+//! Identification chooses its window from the data ([`super::window`]); the EKF's force rate
+//! uses [`window_for_rate`], about 0.4 s of data
 //! (41 samples at 100 Hz). That is long enough to average the position noise of the paper's
 //! encoder (0.01 mm^2) into usable accelerations, and short enough to follow motions up to
 //! about 0.5 Hz with a bias of the second derivative below 1 %.

@@ -87,7 +87,7 @@ pub fn candidate_windows(n: usize, dt: f64) -> Vec<usize> {
 /// estimates are unbiased (the errors-in-variables correction) but noisy; a long one lowers the
 /// noise but distorts the motion, which biases them. The fit is made at windows from
 /// [`SHORTEST_WINDOW_S`] to [`LONGEST_WINDOW_S`] (ratio [`WINDOW_RATIO`]). Windows that
-/// do not fit the log ([`Adequacy`]), or that identify fewer parameters than the best (their
+/// do not fit the log ([`super::adequacy::Adequacy`]), or that identify fewer parameters than the best (their
 /// corrected information on m, d2 or d1 is
 /// noise), or at which the velocity noise hides more than half of the samples that move at
 /// the best window, are not compared: leaving out a force the log carries, or most of the
