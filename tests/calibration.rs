@@ -522,3 +522,25 @@ fn a_longer_window_identifies_a_heavy_spring_on_a_slow_run() {
         }
     }
 }
+
+#[test]
+fn a_kilohertz_log_is_block_averaged_before_identification() {
+    use camspring::estimate::identify::{IDENTIFY_RATE_HZ, MAX_IDENTIFY_SAMPLES};
+    let settings = SimSettings {
+        rate_hz: 1000.0,
+        duration_s: 300.0,
+        seed: 9,
+        ..SimSettings::default()
+    };
+    let (log, truth) = simulate(common::paper_law(), XMAX_MM, FMAX_N, &settings).unwrap();
+    let id = identify(&log, &SensorNoise::default()).unwrap();
+    // Blocks of 10 samples: 100 Hz, 30 000 samples, with the noise variances a tenth.
+    assert_eq!(id.samples, 30_000);
+    assert!(IDENTIFY_RATE_HZ == 100.0 && MAX_IDENTIFY_SAMPLES >= 30_000);
+    assert_eq!(id.adequacy.status, FitStatus::Fits, "{:?}", id.adequacy);
+    assert!((id.reduced_chi2 - 1.0).abs() < 0.1, "{}", id.reduced_chi2);
+    for (k, z) in z_scores(&id, &truth).iter().enumerate() {
+        let z = z.unwrap_or_else(|| panic!("{} not identified", PARAMS[k]));
+        assert!(z.abs() < 3.5, "{}: z {z}", PARAMS[k]);
+    }
+}

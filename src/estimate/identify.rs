@@ -218,7 +218,8 @@ pub struct Identification {
     pub reduced_chi2: f64,
     /// RMS force residual (N).
     pub residual_rms_n: f64,
-    /// Samples in the log.
+    /// Samples identified from: after block averaging to [`IDENTIFY_RATE_HZ`], and at most the
+    /// first [`MAX_IDENTIFY_SAMPLES`].
     pub samples: usize,
     /// Samples used in the dynamic fit.
     pub dynamic_samples: usize,
@@ -751,6 +752,16 @@ fn sandwich(
     positive(&cov).then_some((cov, CovarianceMethod::Model))
 }
 
+/// The most samples identification uses, after block averaging to [`IDENTIFY_RATE_HZ`]: the
+/// first ones of a longer log (about 5.8 hours at 100 Hz). Its work and memory are then bounded
+/// whatever the log's length (about 0.4 GB at most); `samples` in the result says how many
+/// were used.
+pub const MAX_IDENTIFY_SAMPLES: usize = 1 << 21;
+
+/// Logs sampled faster than twice this rate are block-averaged to between it and twice it
+/// before identification (Hz).
+pub const IDENTIFY_RATE_HZ: f64 = 100.0;
+
 /// Identifies the transmission parameters from a calibration log, with the Savitzky-Golay
 /// window chosen from the data ([`choose_window`]).
 pub fn identify(
@@ -767,6 +778,33 @@ pub fn identify_with_window(
     noise: &SensorNoise,
     window_s: Option<f64>,
 ) -> Result<Identification, IdentifyError> {
+    // A log sampled faster than IDENTIFY_RATE_HZ is block-averaged down to it first: the
+    // motion lies far below that rate, white noise averages to its variance over the block
+    // size, and the window scan's work (samples times window samples) stays bounded. A long
+    // log is then identified from its first MAX_IDENTIFY_SAMPLES samples: far more than the
+    // parameters need.
+    let block = ((1.0 / log.dt_s()) / IDENTIFY_RATE_HZ).floor().max(1.0) as usize;
+    let reduced;
+    let (log, noise) = if block > 1 || log.len() > MAX_IDENTIFY_SAMPLES {
+        let blocks = (log.len() / block).min(MAX_IDENTIFY_SAMPLES);
+        let mean =
+            |v: &[f64], k: usize| v[k * block..(k + 1) * block].iter().sum::<f64>() / block as f64;
+        reduced = (
+            CalibrationLog {
+                t_s: (0..blocks).map(|k| mean(&log.t_s, k)).collect(),
+                force_n: (0..blocks).map(|k| mean(&log.force_n, k)).collect(),
+                position_mm: (0..blocks).map(|k| mean(&log.position_mm, k)).collect(),
+                filled: Vec::new(),
+            },
+            SensorNoise {
+                force_variance_n2: noise.force_variance_n2 / block as f64,
+                position_variance_mm2: noise.position_variance_mm2 / block as f64,
+            },
+        );
+        (&reduced.0, &reduced.1)
+    } else {
+        (log, noise)
+    };
     let dt = log.dt_s();
     let Some(w) = window_s else {
         return choose_window(log, noise);

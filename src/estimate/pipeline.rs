@@ -257,7 +257,10 @@ pub fn estimate(
     // Identification's window also gives the velocity whose sign is the friction's.
     let window = identification
         .as_ref()
-        .map_or(sg::window_for_rate(1.0 / dt), |id| id.sg_window);
+        .map_or(sg::window_for_rate(1.0 / dt), |id| {
+            // Identification may run on a block-averaged log: its window in this log's samples.
+            ((id.sg_window_s / dt).round().max(sg::MIN_WINDOW as f64) as usize) | 1
+        });
     let mut settings =
         ekf::default_settings(&init, &opts.noise, dt, opts.discretization, opts.force_rate);
     let force = without_coulomb(log, init.d0_n, &opts.noise, window);

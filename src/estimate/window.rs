@@ -2,6 +2,7 @@
 //! principle ([`choose_window`]), and the filter's remaining bias added to the reported
 //! variances.
 
+use rayon::prelude::*;
 use serde::Serialize;
 
 use super::adequacy::FitStatus;
@@ -107,8 +108,9 @@ pub fn choose_window(
         // Too short a log for the shortest window: the fixed-window fit says why.
         return fit(log, noise, &Differentiator::new(sg::MIN_WINDOW));
     }
+    // The fits are independent: one per core.
     let fits: Vec<Result<Identification, IdentifyError>> = windows
-        .iter()
+        .par_iter()
         .map(|&w| fit(log, noise, &Differentiator::new(w)))
         .collect();
     let fewest_missing = fits
