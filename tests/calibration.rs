@@ -535,6 +535,7 @@ fn a_kilohertz_log_is_block_averaged_before_identification() {
     let id = identify(&log, &SensorNoise::default()).unwrap();
     // Blocks of 10 samples: 100 Hz, 30 000 samples, with the noise variances a tenth.
     assert_eq!(id.samples, 30_000);
+    assert_eq!((id.log_samples, id.block_samples), (300_000, 10));
     assert_eq!(id.adequacy.status, FitStatus::Fits, "{:?}", id.adequacy);
     assert!((id.reduced_chi2 - 1.0).abs() < 0.1, "{}", id.reduced_chi2);
     for (k, z) in z_scores(&id, &truth).iter().enumerate() {

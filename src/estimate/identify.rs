@@ -221,6 +221,10 @@ pub struct Identification {
     /// Samples identified from: after block averaging to [`IDENTIFY_RATE_HZ`], and at most the
     /// first [`MAX_IDENTIFY_SAMPLES`].
     pub samples: usize,
+    /// Samples in the log as read.
+    pub log_samples: usize,
+    /// Log samples averaged into each identified sample (1: none).
+    pub block_samples: usize,
     /// Samples used in the dynamic fit.
     pub dynamic_samples: usize,
     /// Quasi-static samples used for the k2 stage.
@@ -778,12 +782,26 @@ pub fn identify_with_window(
     noise: &SensorNoise,
     window_s: Option<f64>,
 ) -> Result<Identification, IdentifyError> {
+    let log_samples = log.len();
+    let block = ((1.0 / log.dt_s()) / IDENTIFY_RATE_HZ).floor().max(1.0) as usize;
+    let mut id = identify_reduced(log, noise, window_s, block)?;
+    id.log_samples = log_samples;
+    id.block_samples = block;
+    Ok(id)
+}
+
+/// [`identify_with_window`] on the log averaged over blocks of `block` samples.
+fn identify_reduced(
+    log: &CalibrationLog,
+    noise: &SensorNoise,
+    window_s: Option<f64>,
+    block: usize,
+) -> Result<Identification, IdentifyError> {
     // A log sampled faster than IDENTIFY_RATE_HZ is block-averaged down to it first: the
     // motion lies far below that rate, white noise averages to its variance over the block
     // size, and the window scan's work (samples times window samples) stays bounded. A long
     // log is then identified from its first MAX_IDENTIFY_SAMPLES samples: far more than the
     // parameters need.
-    let block = ((1.0 / log.dt_s()) / IDENTIFY_RATE_HZ).floor().max(1.0) as usize;
     let reduced;
     let (log, noise) = if block > 1 || log.len() > MAX_IDENTIFY_SAMPLES {
         let blocks = (log.len() / block).min(MAX_IDENTIFY_SAMPLES);
@@ -1036,6 +1054,8 @@ pub(super) fn fit(
         reduced_chi2: chi2 / dof,
         residual_rms_n: rms,
         samples: log.len(),
+        log_samples: log.len(),
+        block_samples: 1,
         dynamic_samples: m,
         quasi_static_samples: qs_rows.f.len(),
         sg_window: diff.window(),

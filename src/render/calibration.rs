@@ -163,6 +163,8 @@ pub fn identification_json(
         "reduced_chi2": id.reduced_chi2,
         "residual_rms_n": id.residual_rms_n,
         "samples": id.samples,
+        "log_samples": id.log_samples,
+        "block_samples": id.block_samples,
         "dynamic_samples": id.dynamic_samples,
         "quasi_static_samples": id.quasi_static_samples,
         "sample_rate_hz": 1.0 / log.dt_s(),
@@ -210,6 +212,19 @@ pub fn format_identification(id: &Identification) -> String {
         "Identified from {} samples ({} moving, {} quasi-static; Savitzky-Golay window {} samples = {:.3} s, {chosen})",
         id.samples, id.dynamic_samples, id.quasi_static_samples, id.sg_window, id.sg_window_s
     );
+    if id.block_samples > 1 || id.samples * id.block_samples < id.log_samples {
+        let _ = writeln!(
+            s,
+            "  (the log's {} samples averaged in blocks of {}{})",
+            id.log_samples,
+            id.block_samples,
+            if id.samples * id.block_samples < id.log_samples {
+                ", the first ones only: identification uses at most 2^21 samples"
+            } else {
+                ""
+            }
+        );
+    }
     if let Some(problem) = id.adequacy.problem() {
         let _ = writeln!(
             s,
