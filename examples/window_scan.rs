@@ -1,6 +1,8 @@
 //! Scans identification over Savitzky-Golay windows on one simulated log (a development aid).
 //!
 //! Run: `cargo run --release --example window_scan PROFILE SPEED m d0 d1 d2 [seed] [seconds]`.
+//! With `NOISEFREE=1` the log has (almost) no noise; with `EKF=1` it runs `estimate` instead
+//! and prints the filter's final M, k2 and d2 against the truth (`QX=VALUE` sets Q of xdd).
 
 use camspring::estimate::identify::{identify, identify_with_window, Param, SensorNoise};
 use camspring::estimate::sim::{simulate, Dynamics, Profile, SimSettings};
@@ -41,63 +43,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         dynamics,
         ..SimSettings::default()
     };
-    let (mut log, truth) = simulate(law, 15.0, 500.0, &settings)?;
-    if std::env::var("SIGNS").is_ok() {
-        use camspring::estimate::sg;
-        let x = &truth.position_mm;
-        for w in [41usize, 81, 161, 227] {
-            let d = sg::Differentiator::new(w);
-            let v = d.apply(&log.position_mm, 0.01, sg::MOTION_VELOCITY);
-            let band = 3.0 * d.noise_variance(sg::MOTION_VELOCITY, 0.01, 0.01).sqrt();
-            let mut wrong = 0;
-            let mut shifts = Vec::new();
-            for j in 1..v.len() {
-                let i = j + d.half;
-                let vt = x[i + 1] - x[i - 1];
-                if vt.signum() != v[j].signum() && vt.abs() > 1e-9 {
-                    wrong += 1;
-                }
-                if v[j].signum() != v[j - 1].signum() {
-                    // nearest true crossing
-                    let mut k = 0i64;
-                    while k < 200 {
-                        let a = ((i as i64 + k) as usize).min(x.len() - 2);
-                        let b = (i as i64 - k).max(2) as usize;
-                        if (x[a + 1] - x[a - 1]).signum() != (x[a] - x[a - 2]).signum() {
-                            break;
-                        }
-                        if (x[b + 1] - x[b - 1]).signum() != (x[b] - x[b - 2]).signum() {
-                            k = -k;
-                            break;
-                        }
-                        k += 1;
-                    }
-                    shifts.push(k);
-                }
-            }
-            println!(
-                "w {w}: band {band:.4} mm/s, {wrong} wrong signs, crossings {} shifts {:?}",
-                shifts.len(),
-                &shifts[..shifts.len().min(20)]
-            );
-        }
-        return Ok(());
-    }
-    if std::env::var("EXACT").is_ok() {
-        // Take Coulomb friction out with the true sign (an experiment).
-        let x = &truth.position_mm;
-        for i in 1..x.len() - 1 {
-            let v = x[i + 1] - x[i - 1];
-            let sgn = if v > 1e-12 {
-                1.0
-            } else if v < -1e-12 {
-                -1.0
-            } else {
-                0.0
-            };
-            log.force_n[i] -= dynamics.d0_n * sgn;
-        }
-    }
+    let (log, _) = simulate(law, 15.0, 500.0, &settings)?;
     let truth = [
         dynamics.m_n_s2_per_mm,
         dynamics.d0_n,
