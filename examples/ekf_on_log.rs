@@ -31,7 +31,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let est = estimate(&log, &options, |_, _| {})?;
     let z = est.run.last.z;
     let sd = est.run.last.std();
-    println!("{} samples filtered", est.run.states.len());
+    println!("{} samples filtered", est.run.samples);
     println!("k2 = {:.6} +- {:.6} 1/mm", z[idx::K2], sd[idx::K2]);
     println!("M  = {:.6} +- {:.6} N s^2/mm", z[idx::M], sd[idx::M]);
     println!("d2 = {:.3e} +- {:.1e} N s^3/mm^3", z[idx::D2], sd[idx::D2]);

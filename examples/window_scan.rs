@@ -89,12 +89,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 (z[i] - t) / sd[i]
             );
         }
-        let n = run.run.states.len();
-        for k in (0..n).step_by(n / 10) {
-            let s = run.run.states[k];
+        let n = run.run.rows.len();
+        for k in (0..n).step_by((n / 10).max(1)) {
+            let s = run.run.rows[k].state;
             println!(
                 "t {:.0}: M {:.4} k2 {:.4} sigma {:.3} D {:.3}",
-                run.run.t_s[k],
+                run.run.rows[k].t_s,
                 s[idx::M],
                 s[idx::K2],
                 s[idx::SIGMA],

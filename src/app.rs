@@ -232,24 +232,7 @@ pub fn read_log_file(
     sampling_tolerance: f64,
     progress: bool,
 ) -> Result<crate::estimate::log::CalibrationLog> {
-    let file = std::fs::File::open(path).map_err(|source| Error::Read {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    let size = file.metadata().map(|m| m.len()).unwrap_or(0);
-    if size > MAX_LOG_BYTES {
-        return Err(Error::Argument(format!(
-            "{}: {} GiB is larger than the {} GiB a log may have",
-            path.display(),
-            size >> 30,
-            MAX_LOG_BYTES >> 30
-        )));
-    }
-    // A device or pipe has no size: stop it at the same limit while reading.
-    let file = Limited {
-        inner: file,
-        left: MAX_LOG_BYTES,
-    };
+    let (mut reader, size) = open_log_file(path, map, sampling_tolerance)?;
     let bar = progress
         .then(|| {
             progress_bar(
@@ -262,23 +245,33 @@ pub fn read_log_file(
     if let Some(b) = &bar {
         b.set_message(path.display().to_string());
     }
-    let result = crate::estimate::log::read_log(
-        std::io::BufReader::with_capacity(1 << 20, file),
-        map,
-        sampling_tolerance,
-        |bytes| {
-            if let Some(b) = &bar {
-                b.set_position(bytes);
+    let mut log = crate::estimate::log::CalibrationLog::default();
+    let mut failure = None;
+    while let Some(sample) = reader.next() {
+        match sample {
+            Ok(s) => {
+                log.t_s.push(s.t_s);
+                log.force_n.push(s.force_n);
+                log.position_mm.push(s.position_mm);
+                if log.t_s.len().is_multiple_of(65_536) {
+                    if let Some(b) = &bar {
+                        b.set_position(reader.bytes_read());
+                    }
+                }
             }
-        },
-    );
+            Err(e) => {
+                failure = Some(e);
+                break;
+            }
+        }
+    }
     if let Some(b) = bar {
         b.finish_and_clear();
     }
-    let log = result.map_err(|source| Error::Log {
-        path: path.to_path_buf(),
-        source: Box::new(source),
-    })?;
+    if let Some(e) = failure {
+        return Err(log_error(path, e));
+    }
+    log.filled = reader.filled().to_vec();
     if let Some(w) = filled_warning(&log) {
         eprintln!("warning: {}: {w}", path.display());
     }
@@ -453,8 +446,94 @@ pub fn estimate_log(
     Ok(run?)
 }
 
-/// Runs `camspring estimate`: reads the log, runs the EKF and writes the time series CSV
-/// (default `<log>.est.csv`). Returns the run and the path written.
+/// A calibration log file opened for streaming: its size is checked against
+/// [`MAX_LOG_BYTES`], and a device or pipe is stopped at the same limit while read.
+type LogFileReader = crate::estimate::log::LogReader<std::io::BufReader<Limited<std::fs::File>>>;
+
+/// Opens a calibration log file and reads its header; returns the reader and the file size.
+fn open_log_file(
+    path: &Path,
+    map: &crate::estimate::log::ColumnMap,
+    sampling_tolerance: f64,
+) -> Result<(LogFileReader, u64)> {
+    let file = std::fs::File::open(path).map_err(|source| Error::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let size = file.metadata().map(|m| m.len()).unwrap_or(0);
+    if size > MAX_LOG_BYTES {
+        return Err(Error::Argument(format!(
+            "{}: {} GiB is larger than the {} GiB a log may have",
+            path.display(),
+            size >> 30,
+            MAX_LOG_BYTES >> 30
+        )));
+    }
+    let file = Limited {
+        inner: file,
+        left: MAX_LOG_BYTES,
+    };
+    let reader = crate::estimate::log::LogReader::new(
+        std::io::BufReader::with_capacity(1 << 20, file),
+        map,
+        sampling_tolerance,
+    )
+    .map_err(|source| log_error(path, source))?;
+    Ok((reader, size))
+}
+
+fn log_error(path: &Path, source: crate::estimate::log::LogError) -> Error {
+    Error::Log {
+        path: path.to_path_buf(),
+        source: Box::new(source),
+    }
+}
+
+/// est.csv written row by row as the filter makes them, into a temporary file that replaces
+/// the output only when the run is complete. A write error stops the run and is kept.
+struct EstimateCsv {
+    file: Option<crate::export::AtomicFile>,
+    line: String,
+    error: Option<crate::export::ExportError>,
+}
+
+impl EstimateCsv {
+    fn write(&mut self, bytes_of: impl FnOnce(&mut String)) -> std::ops::ControlFlow<()> {
+        let Some(file) = &mut self.file else {
+            return std::ops::ControlFlow::Break(());
+        };
+        self.line.clear();
+        bytes_of(&mut self.line);
+        match file.write_all(self.line.as_bytes()) {
+            Ok(()) => std::ops::ControlFlow::Continue(()),
+            Err(e) => {
+                self.error = Some(e);
+                self.file = None;
+                std::ops::ControlFlow::Break(())
+            }
+        }
+    }
+}
+
+impl crate::estimate::pipeline::RowSink for EstimateCsv {
+    fn restart(&mut self) {
+        if let Some(file) = &mut self.file {
+            if let Err(e) = file.restart() {
+                self.error = Some(e);
+                self.file = None;
+            }
+        }
+        let _ = self.write(|l| l.push_str(&crate::render::calibration::estimate_csv_header()));
+    }
+
+    fn row(&mut self, row: &crate::estimate::ekf::EkfRow) -> std::ops::ControlFlow<()> {
+        self.write(|l| crate::render::calibration::estimate_csv_row(row, l))
+    }
+}
+
+/// Runs `camspring estimate`: streams the log twice (a survey with identification's samples,
+/// then the filter), writing the time series CSV (default `<log>.est.csv`) as the filter
+/// goes. Memory is constant whatever the log's length. Returns the run and the path written.
 pub fn run_estimate(
     log_path: &Path,
     map: &crate::estimate::log::ColumnMap,
@@ -462,12 +541,85 @@ pub fn run_estimate(
     opts: &EstimateOptions,
     out: Option<&Path>,
 ) -> Result<(EstimateRun, PathBuf)> {
-    let log = read_log_file(log_path, map, sampling_tolerance, true)?;
-    let est = estimate_log(&log, opts, true)?;
+    use crate::estimate::pipeline::{estimate_stream, survey, EstimateError};
+    // The first pass: the whole log is checked (every error named with its line) before any
+    // output is started.
+    let (mut reader, size) = open_log_file(log_path, map, sampling_tolerance)?;
+    let bar = progress_bar(
+        size,
+        8 << 20,
+        "survey {bar:40} {bytes}/{total_bytes} ({bytes_per_sec})",
+    );
+    let mut count = 0usize;
+    let surveyed = survey(
+        std::iter::from_fn(|| {
+            let next = reader.next();
+            count += 1;
+            if count.is_multiple_of(65_536) {
+                if let Some(b) = &bar {
+                    b.set_position(reader.bytes_read());
+                }
+            }
+            next
+        }),
+        opts.identify_span_s,
+    );
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    let surveyed = surveyed.map_err(|e| log_error(log_path, e))?;
+    let filled = crate::estimate::log::CalibrationLog {
+        filled: reader.filled().to_vec(),
+        ..Default::default()
+    };
+    if let Some(w) = filled_warning(&filled) {
+        eprintln!("warning: {}: {w}", log_path.display());
+    }
+    drop(reader);
     let out = out
         .map(Path::to_path_buf)
         .unwrap_or_else(|| log_path.with_extension("est.csv"));
-    write_atomic(&out, &crate::render::calibration::estimate_csv(&est.run))?;
+    let mut csv = EstimateCsv {
+        file: Some(crate::export::AtomicFile::create(&out)?),
+        line: String::with_capacity(512),
+        error: None,
+    };
+    let _ = csv.write(|l| l.push_str(&crate::render::calibration::estimate_csv_header()));
+    let bar = progress_bar(
+        surveyed.samples as u64,
+        200_000,
+        "EKF {bar:40} {pos}/{len} samples ({per_sec})",
+    );
+    let open = || {
+        open_log_file(log_path, map, sampling_tolerance)
+            .map(|(reader, _)| reader)
+            .map_err(|e| crate::estimate::log::LogError::Io(e.to_string()))
+    };
+    let result = estimate_stream(&surveyed, open, opts, &mut csv, |k, _| {
+        if let Some(b) = &bar {
+            b.set_position(k as u64);
+        }
+    });
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    if let Some(e) = csv.error.take() {
+        return Err(e.into());
+    }
+    let est = match result {
+        Ok(est) => est,
+        Err(EstimateError::Log(e)) => return Err(log_error(log_path, *e)),
+        Err(e) => return Err(e.into()),
+    };
+    match csv.file.take() {
+        Some(file) => file.commit()?,
+        None => {
+            return Err(Error::Argument(format!(
+                "{}: the time series was not written",
+                out.display()
+            )))
+        }
+    }
     Ok((est, out))
 }
 

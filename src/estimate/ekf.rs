@@ -389,15 +389,6 @@ pub enum ForceRate {
     ZeroPhase,
 }
 
-/// The first log sample that has a force rate (zero-phase drops half a window at the start),
-/// without computing the rate.
-pub fn force_rate_first_sample(dt: f64, how: ForceRate) -> usize {
-    match how {
-        ForceRate::ZeroPhase => super::sg::Differentiator::for_rate(1.0 / dt).half,
-        ForceRate::FirstOrder { .. } => 0,
-    }
-}
-
 /// The force rate of a force signal sampled every `dt`, aligned with the samples
 /// `first .. first + len` of the log (zero-phase drops half a window at each end).
 pub fn force_rate(force_n: &[f64], dt: f64, how: ForceRate) -> (Vec<f64>, usize) {
@@ -426,21 +417,34 @@ pub fn force_rate(force_n: &[f64], dt: f64, how: ForceRate) -> (Vec<f64>, usize)
     }
 }
 
+/// One filtered sample: the state, its standard deviations, and the parallel filter's
+/// offsets with theirs (a row of est.csv).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EkfRow {
+    /// Time (s).
+    pub t_s: f64,
+    /// State estimate after the sample.
+    pub state: State,
+    /// Its standard deviation.
+    pub std: State,
+    /// F0 and d0 from the parallel filter (N).
+    pub offsets: [f64; 2],
+    /// Their standard deviations (N).
+    pub offset_stds: [f64; 2],
+}
+
 /// A run of the filter over a log.
 #[derive(Debug, Clone)]
 pub struct EkfRun {
-    /// Time of each filtered sample (s).
-    pub t_s: Vec<f64>,
+    /// Every filtered sample, when the run collected them ([`run`]); empty when they were
+    /// streamed to a sink instead ([`Filter`]).
+    pub rows: Vec<EkfRow>,
     /// Index in the log of the first filtered sample.
     pub first_sample: usize,
-    /// State estimate after each sample.
-    pub states: Vec<State>,
-    /// Its standard deviation.
-    pub stds: Vec<State>,
-    /// F0 and d0 from the parallel filter after each sample (N).
-    pub offsets: Vec<[f64; 2]>,
-    /// Their standard deviations.
-    pub offset_stds: Vec<[f64; 2]>,
+    /// Samples filtered.
+    pub samples: usize,
+    /// Time of the last filtered sample (s).
+    pub t_end_s: f64,
     /// Final filter (state and covariance).
     pub last: Ekf,
     /// Final offset filter.
@@ -456,6 +460,21 @@ pub struct EkfRun {
 /// (temperature, wear), far slower than the impedance states.
 pub const OFFSET_MEMORY_S: f64 = 30.0;
 
+/// Where the filter starts.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Start {
+    /// At this state.
+    State(State),
+    /// At rest at the first filtered sample's position, from an init ([`initial_state`]):
+    /// sigma's initial standard deviation follows k2's over the stroke (mm).
+    Init {
+        /// The init.
+        init: EkfInit,
+        /// Stroke (mm).
+        stroke_mm: f64,
+    },
+}
+
 /// What the filter runs over and how it starts.
 #[derive(Debug, Clone, Copy)]
 pub struct EkfInput<'a> {
@@ -468,7 +487,7 @@ pub struct EkfInput<'a> {
     /// How the force rate is computed from the force.
     pub force_rate: ForceRate,
     /// Initial state.
-    pub z0: State,
+    pub start: Start,
     /// Tuning: Q, P0, R, bounds and outlier threshold.
     pub settings: EkfSettings,
     /// Initial [F0, d0] of the parallel offset filter (N).
@@ -477,7 +496,292 @@ pub struct EkfInput<'a> {
     pub offset_memory_s: f64,
 }
 
-/// Runs the filter from `input.z0` over the log, after computing the force rate;
+/// The force rate computed as samples arrive, paired with the sample it belongs to.
+#[derive(Debug, Clone)]
+enum RateStage {
+    /// Savitzky-Golay rate kernel: the rate of the window's centre sample (lag: half a window).
+    ZeroPhase {
+        weights: Vec<f64>,
+        scale: f64,
+        buffer: std::collections::VecDeque<(usize, super::log::Sample)>,
+    },
+    /// First-order low-pass: the rate at sample k belongs to sample k - delay.
+    FirstOrder {
+        a: f64,
+        tau: f64,
+        low: Option<f64>,
+        delay: usize,
+        buffer: std::collections::VecDeque<(usize, super::log::Sample)>,
+    },
+}
+
+impl RateStage {
+    fn new(how: ForceRate, dt: f64) -> RateStage {
+        match how {
+            ForceRate::ZeroPhase => {
+                let d = super::sg::Differentiator::for_rate(1.0 / dt);
+                RateStage::ZeroPhase {
+                    weights: d.weights[super::sg::RATE].clone(),
+                    scale: 1.0 / dt,
+                    buffer: std::collections::VecDeque::with_capacity(d.window() + 1),
+                }
+            }
+            ForceRate::FirstOrder { time_constant_s } => {
+                let tau = time_constant_s.max(dt);
+                let delay = (tau / dt).round().clamp(0.0, 1e7) as usize;
+                RateStage::FirstOrder {
+                    a: dt / (tau + dt),
+                    tau,
+                    low: None,
+                    delay,
+                    buffer: std::collections::VecDeque::with_capacity(delay.min(1 << 16) + 1),
+                }
+            }
+        }
+    }
+
+    /// Samples of a log of `n` that get a rate.
+    fn outputs(&self, n: usize) -> usize {
+        match self {
+            RateStage::ZeroPhase { weights, .. } => n.saturating_sub(weights.len() - 1),
+            RateStage::FirstOrder { delay, .. } => n.saturating_sub(*delay),
+        }
+    }
+
+    fn push(
+        &mut self,
+        i: usize,
+        s: super::log::Sample,
+    ) -> Option<(usize, super::log::Sample, f64)> {
+        match self {
+            RateStage::ZeroPhase {
+                weights,
+                scale,
+                buffer,
+            } => {
+                buffer.push_back((i, s));
+                if buffer.len() > weights.len() {
+                    buffer.pop_front();
+                }
+                if buffer.len() < weights.len() {
+                    return None;
+                }
+                let rate = weights
+                    .iter()
+                    .zip(buffer.iter())
+                    .map(|(w, (_, b))| w * b.force_n)
+                    .sum::<f64>()
+                    * *scale;
+                let (j, c) = buffer[weights.len() / 2];
+                Some((j, c, rate))
+            }
+            RateStage::FirstOrder {
+                a,
+                tau,
+                low,
+                delay,
+                buffer,
+            } => {
+                let l = low.get_or_insert(s.force_n);
+                *l += *a * (s.force_n - *l);
+                let rate = (s.force_n - *l) / *tau;
+                // The filter delays the force rate by about tau at the motion's frequencies;
+                // the position is delayed to match (an on-line filter buffers it).
+                buffer.push_back((i, s));
+                if buffer.len() > *delay {
+                    let (j, c) = buffer.pop_front()?;
+                    Some((j, c, rate))
+                } else {
+                    None
+                }
+            }
+        }
+    }
+}
+
+/// The filter run as samples arrive: the force rate, the EKF and the parallel offset filter.
+/// Its memory is constant (the force-rate window); each filtered sample comes out of
+/// [`Filter::push`] as an [`EkfRow`], lagging the input by the force-rate filter's delay.
+#[derive(Debug, Clone)]
+pub struct Filter {
+    rate: RateStage,
+    start: Start,
+    settings: EkfSettings,
+    ekf: Option<Ekf>,
+    offsets: OffsetFilter,
+    outputs: usize,
+    k: usize,
+    previous: Option<(f64, f64)>,
+    nis: (f64, usize),
+    residual: (f64, f64),
+    outliers: usize,
+    first_sample: usize,
+    t_end_s: f64,
+}
+
+impl Filter {
+    /// A filter over a log of `samples` samples every `dt` seconds.
+    pub fn new(
+        samples: usize,
+        dt: f64,
+        how: ForceRate,
+        start: Start,
+        settings: EkfSettings,
+        offsets0: [f64; 2],
+        offset_memory_s: f64,
+    ) -> Result<Filter, EkfError> {
+        if samples < 3 || !(dt.is_finite() && dt > 0.0) {
+            return Err(EkfError::Input(format!(
+                "{samples} samples; the filter needs at least 3 with force and position"
+            )));
+        }
+        let rate = RateStage::new(how, dt);
+        let outputs = rate.outputs(samples);
+        if outputs < 3 {
+            return Err(EkfError::Input(format!(
+                "{samples} samples are fewer than the force-rate filter's window"
+            )));
+        }
+        Ok(Filter {
+            rate,
+            start,
+            settings,
+            ekf: None,
+            offsets: OffsetFilter::new(
+                offsets0[0],
+                offsets0[1],
+                offset_memory_s,
+                dt,
+                settings.r_position_mm2.max(1e-12),
+            ),
+            outputs,
+            k: 0,
+            previous: None,
+            nis: (0.0, 0),
+            residual: (0.0, 0.0),
+            outliers: 0,
+            first_sample: 0,
+            t_end_s: f64::NAN,
+        })
+    }
+
+    /// The settings, with sigma's initial standard deviation once the filter has started.
+    pub fn settings(&self) -> EkfSettings {
+        self.ekf.as_ref().map_or(self.settings, |e| e.settings)
+    }
+
+    /// Takes log sample `i` (in order from 0); returns the row of the sample it filtered, if
+    /// any (the first ones only fill the force-rate window).
+    pub fn push(
+        &mut self,
+        i: usize,
+        sample: super::log::Sample,
+    ) -> Result<Option<EkfRow>, EkfError> {
+        let Some((i, s, rate)) = self.rate.push(i, sample) else {
+            return Ok(None);
+        };
+        let k = self.k;
+        self.k += 1;
+        let ekf = match (&mut self.ekf, self.previous) {
+            (Some(ekf), Some((t_prev, rate_prev))) => {
+                let info = ekf.step(rate_prev, rate, s.t_s - t_prev, s.position_mm, i, s.t_s)?;
+                if info.innovation_mm.abs()
+                    > self.settings.outlier_sigmas * info.innovation_variance_mm2.sqrt()
+                {
+                    self.outliers += 1;
+                }
+                if 2 * k >= self.outputs {
+                    self.nis.0 +=
+                        info.innovation_mm * info.innovation_mm / info.innovation_variance_mm2;
+                    self.nis.1 += 1;
+                }
+                ekf
+            }
+            (slot, _) => {
+                // The first filtered sample initialises; its measurement is used without a
+                // prediction.
+                let (z0, settings) = match self.start {
+                    Start::State(z) => (z, self.settings),
+                    Start::Init { init, stroke_mm } => {
+                        let (z, sigma_std) = initial_state(&init, s.position_mm, stroke_mm);
+                        let mut settings = self.settings;
+                        settings.p0_std[idx::SIGMA] = sigma_std;
+                        (z, settings)
+                    }
+                };
+                self.first_sample = i;
+                let ekf = slot.insert(Ekf::new(z0, settings));
+                ekf.update(s.position_mm);
+                ekf
+            }
+        };
+        self.previous = Some((s.t_s, rate));
+        self.t_end_s = s.t_s;
+        let z = ekf.z;
+        // Parallel filter: what the impedance model does not explain is F0 + d0 sgn(xd).
+        let d1 = z[idx::D] - 3.0 * z[idx::D2] * z[idx::XD] * z[idx::XD];
+        let spring_minus_f0 = z[idx::SIGMA] / z[idx::K2];
+        let explained = z[idx::M] * z[idx::XDD]
+            + d1 * z[idx::XD]
+            + z[idx::D2] * z[idx::XD].powi(3)
+            + spring_minus_f0;
+        let residual = s.force_n - explained;
+        let band = 3.0 * ekf.p[(1, 1)].max(0.0).sqrt();
+        let sgn = if z[idx::XD] > band {
+            1.0
+        } else if z[idx::XD] < -band {
+            -1.0
+        } else {
+            0.0
+        };
+        let offsets = &mut self.offsets;
+        let before = offsets.theta[0] + offsets.theta[1] * sgn;
+        self.residual.0 += (residual - before).powi(2);
+        self.residual.1 += 1.0;
+        offsets.residual_variance = self.residual.0 / self.residual.1;
+        offsets.update(residual, sgn);
+        Ok(Some(EkfRow {
+            t_s: s.t_s,
+            state: z,
+            std: ekf.std(),
+            offsets: [offsets.theta[0], offsets.theta[1]],
+            offset_stds: offsets.std(),
+        }))
+    }
+
+    /// Samples filtered so far, and how many the log gives.
+    pub fn progress(&self) -> (usize, usize) {
+        (self.k, self.outputs)
+    }
+
+    /// The run's summary after the last sample (no rows).
+    pub fn finish(self) -> Result<EkfRun, EkfError> {
+        let Some(last) = self.ekf else {
+            return Err(EkfError::Input(
+                "no sample reached the filter (fewer samples than its force-rate window)".into(),
+            ));
+        };
+        if self.k != self.outputs {
+            return Err(EkfError::Input(format!(
+                "the filter saw {} samples where the log gave {} before (did the log change while \
+                 it was read?)",
+                self.k, self.outputs
+            )));
+        }
+        Ok(EkfRun {
+            rows: Vec::new(),
+            first_sample: self.first_sample,
+            samples: self.k,
+            t_end_s: self.t_end_s,
+            last,
+            offset_filter: self.offsets,
+            outliers: self.outliers,
+            nis_mean: self.nis.0 / self.nis.1.max(1) as f64,
+        })
+    }
+}
+
+/// Runs the filter over a log held in memory, collecting every row;
 /// `progress(k, n)` is called as samples are processed.
 pub fn run(
     input: EkfInput<'_>,
@@ -488,7 +792,7 @@ pub fn run(
         force_n,
         position_mm,
         force_rate: how,
-        z0,
+        start,
         settings,
         offsets0,
         offset_memory_s,
@@ -500,94 +804,24 @@ pub fn run(
         )));
     }
     let dt = (t_s[n - 1] - t_s[0]) / (n - 1) as f64;
-    let (rate, first) = force_rate(force_n, dt, how);
-    if rate.len() < 3 {
-        return Err(EkfError::Input(format!(
-            "{n} samples are fewer than the force-rate filter's window"
-        )));
-    }
-    let len = rate.len();
-    let mut ekf = Ekf::new(z0, settings);
-    let mut offsets = OffsetFilter::new(
-        offsets0[0],
-        offsets0[1],
-        offset_memory_s,
-        dt,
-        settings.r_position_mm2.max(1e-12),
-    );
-    let mut out = EkfRun {
-        t_s: Vec::with_capacity(len),
-        first_sample: first,
-        states: Vec::with_capacity(len),
-        stds: Vec::with_capacity(len),
-        offsets: Vec::with_capacity(len),
-        offset_stds: Vec::with_capacity(len),
-        last: ekf.clone(),
-        offset_filter: offsets,
-        outliers: 0,
-        nis_mean: f64::NAN,
-    };
-    let (mut nis_sum, mut nis_count) = (0.0, 0usize);
-    // The first sample initialises; its measurement is used without a prediction.
-    ekf.update(position_mm[first]);
-    let mut residual_var = 0.0;
-    let mut residual_count = 0.0;
-    for k in 0..len {
-        let i = first + k;
-        if k > 0 {
-            let info = ekf.step(
-                rate[k - 1],
-                rate[k],
-                t_s[i] - t_s[i - 1],
-                position_mm[i],
-                i,
-                t_s[i],
-            )?;
-            if info.innovation_mm.abs()
-                > settings.outlier_sigmas * info.innovation_variance_mm2.sqrt()
-            {
-                out.outliers += 1;
-            }
-            if 2 * k >= len {
-                nis_sum += info.innovation_mm * info.innovation_mm / info.innovation_variance_mm2;
-                nis_count += 1;
-            }
-        }
-        let z = ekf.z;
-        // Parallel filter: what the impedance model does not explain is F0 + d0 sgn(xd).
-        let d1 = z[idx::D] - 3.0 * z[idx::D2] * z[idx::XD] * z[idx::XD];
-        let spring_minus_f0 = z[idx::SIGMA] / z[idx::K2];
-        let explained = z[idx::M] * z[idx::XDD]
-            + d1 * z[idx::XD]
-            + z[idx::D2] * z[idx::XD].powi(3)
-            + spring_minus_f0;
-        let residual = force_n[i] - explained;
-        let band = 3.0 * ekf.p[(1, 1)].max(0.0).sqrt();
-        let sgn = if z[idx::XD] > band {
-            1.0
-        } else if z[idx::XD] < -band {
-            -1.0
-        } else {
-            0.0
+    let mut filter = Filter::new(n, dt, how, start, settings, offsets0, offset_memory_s)?;
+    let mut rows = Vec::with_capacity(filter.outputs);
+    for i in 0..n {
+        let sample = super::log::Sample {
+            t_s: t_s[i],
+            force_n: force_n[i],
+            position_mm: position_mm[i],
         };
-        let before = offsets.theta[0] + offsets.theta[1] * sgn;
-        residual_var += (residual - before).powi(2);
-        residual_count += 1.0;
-        offsets.residual_variance = residual_var / residual_count;
-        offsets.update(residual, sgn);
-        out.t_s.push(t_s[i]);
-        out.states.push(z);
-        out.stds.push(ekf.std());
-        out.offsets.push([offsets.theta[0], offsets.theta[1]]);
-        out.offset_stds.push(offsets.std());
-        if k % 65_536 == 0 {
-            progress(k, len);
+        if let Some(row) = filter.push(i, sample)? {
+            rows.push(row);
+            if rows.len() % 65_536 == 1 {
+                progress(rows.len() - 1, filter.outputs);
+            }
         }
     }
-    out.last = ekf;
-    out.offset_filter = offsets;
-    out.nis_mean = nis_sum / nis_count.max(1) as f64;
-    Ok(out)
+    let mut run = filter.finish()?;
+    run.rows = rows;
+    Ok(run)
 }
 
 /// Where the filter's initial state comes from.
@@ -739,4 +973,94 @@ pub fn initial_state(init: &EkfInit, x0_mm: f64, stroke_mm: f64) -> (State, f64)
         init.d2_n_s3_per_mm3.0,
     ]);
     (z, sigma * rel.max(0.05))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::estimate::log::Sample;
+
+    /// A force with motion and noise-like wiggles, sampled every 10 ms.
+    fn signal(n: usize) -> Vec<Sample> {
+        (0..n)
+            .map(|i| {
+                let t = i as f64 * 0.01;
+                Sample {
+                    t_s: t,
+                    force_n: 5.0 + 3.0 * (0.9 * t).sin() + 0.01 * ((i * 7919) % 13) as f64,
+                    position_mm: 4.0 + (0.9 * t).sin(),
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_streamed_force_rate_is_the_batch_one_on_the_same_samples() {
+        let samples = signal(1000);
+        let force: Vec<f64> = samples.iter().map(|s| s.force_n).collect();
+        for how in [
+            ForceRate::ZeroPhase,
+            ForceRate::FirstOrder {
+                time_constant_s: 0.05,
+            },
+        ] {
+            let (batch, first) = force_rate(&force, 0.01, how);
+            let mut stage = RateStage::new(how, 0.01);
+            let streamed: Vec<(usize, f64)> = samples
+                .iter()
+                .enumerate()
+                .filter_map(|(i, s)| stage.push(i, *s).map(|(j, _, r)| (j, r)))
+                .collect();
+            assert_eq!(streamed.len(), batch.len(), "{how:?}");
+            assert_eq!(stage.outputs(samples.len()), batch.len(), "{how:?}");
+            for (k, (j, r)) in streamed.iter().enumerate() {
+                assert_eq!(*j, first + k, "{how:?}");
+                assert!(
+                    (r - batch[k]).abs() <= 1e-9 * batch[k].abs().max(1.0),
+                    "{how:?} {k}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn a_log_shorter_than_the_rate_window_is_refused_before_filtering() {
+        let init = EkfInit {
+            k2_per_mm: (0.2, 0.01),
+            mu_n: 1.0,
+            f0_n: 0.0,
+            d0_n: 0.0,
+            m_n_s2_per_mm: (0.05, 0.005),
+            d1_n_s_per_mm: (0.2, 0.02),
+            d2_n_s3_per_mm3: (0.0, 0.0),
+        };
+        let noise = crate::estimate::identify::SensorNoise {
+            force_variance_n2: 1e-3,
+            position_variance_mm2: 1e-4,
+        };
+        let settings = default_settings(
+            &init,
+            &noise,
+            0.01,
+            Discretization::Rk4,
+            ForceRate::ZeroPhase,
+        );
+        let start = Start::Init {
+            init,
+            stroke_mm: 10.0,
+        };
+        // The zero-phase window at 100 Hz is 41 samples: 42 give one rate, 43 give three.
+        for (n, ok) in [(2, false), (42, false), (43, true)] {
+            let r = Filter::new(
+                n,
+                0.01,
+                ForceRate::ZeroPhase,
+                start,
+                settings,
+                [0.0, 0.0],
+                30.0,
+            );
+            assert_eq!(r.is_ok(), ok, "{n} samples");
+        }
+    }
 }

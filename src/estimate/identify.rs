@@ -38,7 +38,7 @@ pub use super::adequacy::{
     whiteness, Adequacy, FitStatus, Whiteness, MAX_REDUCED_CHI2, MIN_REDUCED_CHI2, WHITENESS_LAGS,
     WHITENESS_LEVEL,
 };
-use super::log::CalibrationLog;
+use super::log::{CalibrationLog, MIN_LOG_SAMPLES};
 use super::sg::{self, Differentiator};
 pub use super::window::{
     candidate_windows, choose_window, WindowCandidate, WindowChoice, WindowMethod,
@@ -218,6 +218,12 @@ pub struct Identification {
     pub reduced_chi2: f64,
     /// RMS force residual (N).
     pub residual_rms_n: f64,
+    /// The smallest share, over m, d1 and d2, of a parameter's information (its diagonal
+    /// entry in the normal matrix) that is signal rather than the noise of its filtered
+    /// regressor: near 1 when that noise is negligible, near 0 where the errors-in-variables
+    /// correction removes almost all of it (and, being a first-order correction, is then not
+    /// to be trusted).
+    pub signal_share: f64,
     /// Samples identified from: after block averaging to [`IDENTIFY_RATE_HZ`], and at most the
     /// first [`MAX_IDENTIFY_SAMPLES`].
     pub samples: usize,
@@ -782,47 +788,161 @@ pub fn identify_with_window(
     noise: &SensorNoise,
     window_s: Option<f64>,
 ) -> Result<Identification, IdentifyError> {
-    let log_samples = log.len();
-    let block = ((1.0 / log.dt_s()) / IDENTIFY_RATE_HZ).floor().max(1.0) as usize;
-    let mut id = identify_reduced(log, noise, window_s, block)?;
-    id.log_samples = log_samples;
-    id.block_samples = block;
+    if log.len() < MIN_LOG_SAMPLES {
+        return identify_samples(log, noise, window_s);
+    }
+    let block = block_for_interval(log.dt_s());
+    if block == 1 && log.len() <= MAX_IDENTIFY_SAMPLES {
+        let mut id = identify_samples(log, noise, window_s)?;
+        id.log_samples = log.len();
+        id.block_samples = 1;
+        return Ok(id);
+    }
+    let mut reduction = Reduction::with_block(block, MAX_IDENTIFY_SAMPLES);
+    for i in 0..log.len() {
+        reduction.push(super::log::Sample {
+            t_s: log.t_s[i],
+            force_n: log.force_n[i],
+            position_mm: log.position_mm[i],
+        });
+    }
+    identify_reduced(&reduction.finish(), noise, window_s)
+}
+
+/// The block of samples averaged into one for identification at a sampling interval `dt_s`:
+/// logs sampled faster than [`IDENTIFY_RATE_HZ`] are brought down to between it and twice it.
+pub fn block_for_interval(dt_s: f64) -> usize {
+    ((1.0 / dt_s) / IDENTIFY_RATE_HZ).floor().clamp(1.0, 1e6) as usize
+}
+
+/// The samples identification uses, gathered as a log is read: block means of
+/// [`block_for_interval`] samples (white noise averages to its variance over the block size,
+/// and the motion lies far below [`IDENTIFY_RATE_HZ`]), and only the first `max_blocks` of
+/// them. Its memory is bounded whatever the log's length.
+#[derive(Debug, Clone)]
+pub struct Reduction {
+    block: usize,
+    max_blocks: usize,
+    first: Option<super::log::Sample>,
+    sum: [f64; 3],
+    in_block: usize,
+    log: CalibrationLog,
+    log_samples: usize,
+}
+
+/// A log reduced for identification ([`Reduction`]).
+#[derive(Debug, Clone)]
+pub struct ReducedLog {
+    /// The block means.
+    pub log: CalibrationLog,
+    /// Samples per block.
+    pub block: usize,
+    /// Samples in the whole log.
+    pub log_samples: usize,
+}
+
+impl Reduction {
+    /// A reduction whose block is set by the log's first sampling interval.
+    pub fn new(max_blocks: usize) -> Reduction {
+        Reduction::with_block(0, max_blocks)
+    }
+
+    /// A reduction over blocks of `block` samples (0: set by the first interval).
+    pub fn with_block(block: usize, max_blocks: usize) -> Reduction {
+        Reduction {
+            block,
+            max_blocks,
+            first: None,
+            sum: [0.0; 3],
+            in_block: 0,
+            log: CalibrationLog::default(),
+            log_samples: 0,
+        }
+    }
+
+    /// Adds the next sample of the log.
+    pub fn push(&mut self, s: super::log::Sample) {
+        self.log_samples += 1;
+        if self.block == 0 {
+            match self.first {
+                None => {
+                    self.first = Some(s);
+                    return;
+                }
+                Some(f) => {
+                    self.block = block_for_interval(s.t_s - f.t_s);
+                    self.first = None;
+                    self.add(f);
+                }
+            }
+        }
+        self.add(s);
+    }
+
+    fn add(&mut self, s: super::log::Sample) {
+        if self.log.len() >= self.max_blocks {
+            return;
+        }
+        self.sum[0] += s.t_s;
+        self.sum[1] += s.force_n;
+        self.sum[2] += s.position_mm;
+        self.in_block += 1;
+        if self.in_block == self.block {
+            let b = self.block as f64;
+            self.log.t_s.push(self.sum[0] / b);
+            self.log.force_n.push(self.sum[1] / b);
+            self.log.position_mm.push(self.sum[2] / b);
+            self.sum = [0.0; 3];
+            self.in_block = 0;
+        }
+    }
+
+    /// The reduced log (a partial last block is left out).
+    pub fn finish(mut self) -> ReducedLog {
+        if let Some(f) = self.first.take() {
+            self.block = 1;
+            self.add(f);
+        }
+        ReducedLog {
+            log: self.log,
+            block: self.block.max(1),
+            log_samples: self.log_samples,
+        }
+    }
+}
+
+/// Identification on a log reduced by [`Reduction`]: the sensor noise of the log's samples is
+/// brought to that of the block means, and the result says how many samples the log had and
+/// how many were averaged into each.
+pub fn identify_reduced(
+    reduced: &ReducedLog,
+    noise: &SensorNoise,
+    window_s: Option<f64>,
+) -> Result<Identification, IdentifyError> {
+    let b = reduced.block as f64;
+    let block_noise = SensorNoise {
+        force_variance_n2: noise.force_variance_n2 / b,
+        position_variance_mm2: noise.position_variance_mm2 / b,
+    };
+    let mut id = identify_samples(&reduced.log, &block_noise, window_s)?;
+    id.log_samples = reduced.log_samples;
+    id.block_samples = reduced.block;
     Ok(id)
 }
 
-/// [`identify_with_window`] on the log averaged over blocks of `block` samples.
-fn identify_reduced(
+/// Identification on every sample of `log` as it is.
+fn identify_samples(
     log: &CalibrationLog,
     noise: &SensorNoise,
     window_s: Option<f64>,
-    block: usize,
 ) -> Result<Identification, IdentifyError> {
-    // A log sampled faster than IDENTIFY_RATE_HZ is block-averaged down to it first: the
-    // motion lies far below that rate, white noise averages to its variance over the block
-    // size, and the window scan's work (samples times window samples) stays bounded. A long
-    // log is then identified from its first MAX_IDENTIFY_SAMPLES samples: far more than the
-    // parameters need.
-    let reduced;
-    let (log, noise) = if block > 1 || log.len() > MAX_IDENTIFY_SAMPLES {
-        let blocks = (log.len() / block).min(MAX_IDENTIFY_SAMPLES);
-        let mean =
-            |v: &[f64], k: usize| v[k * block..(k + 1) * block].iter().sum::<f64>() / block as f64;
-        reduced = (
-            CalibrationLog {
-                t_s: (0..blocks).map(|k| mean(&log.t_s, k)).collect(),
-                force_n: (0..blocks).map(|k| mean(&log.force_n, k)).collect(),
-                position_mm: (0..blocks).map(|k| mean(&log.position_mm, k)).collect(),
-                filled: Vec::new(),
-            },
-            SensorNoise {
-                force_variance_n2: noise.force_variance_n2 / block as f64,
-                position_variance_mm2: noise.position_variance_mm2 / block as f64,
-            },
-        );
-        (&reduced.0, &reduced.1)
-    } else {
-        (log, noise)
-    };
+    if log.len() < MIN_LOG_SAMPLES {
+        return Err(IdentifyError::TooShort {
+            found: log.len(),
+            window: sg::MIN_WINDOW,
+            needed: 4 * sg::MIN_WINDOW,
+        });
+    }
     let dt = log.dt_s();
     let Some(w) = window_s else {
         return choose_window(log, noise);
@@ -998,6 +1118,12 @@ pub(super) fn fit(
     }
     let weights = weights_at(&p, &rows);
     let (jtj, _, _) = normal(&p, &rows, &active, &weights);
+    let raw = jtj + correction(&rows, &active, &weights);
+    let signal_share = NOISY_ORDER
+        .iter()
+        .filter(|&&k| active[k] && raw[(k, k)] > 0.0)
+        .map(|&k| jtj[(k, k)] / raw[(k, k)])
+        .fold(1.0_f64, f64::min);
     let m = rows.f.len();
     let chi2: f64 = (0..m)
         .map(|i| weights[i] * (rows.f[i] - model(&p, &rows, i).0).powi(2))
@@ -1066,6 +1192,7 @@ pub(super) fn fit(
         },
         adequacy,
         filter_bias_std: [0.0; 7],
+        signal_share,
     })
 }
 

@@ -383,6 +383,9 @@ impl CalibrationLog {
 
     /// Sampling interval (mean).
     pub fn dt_s(&self) -> f64 {
+        if self.t_s.len() < 2 {
+            return f64::NAN;
+        }
         (self.t_s[self.t_s.len() - 1] - self.t_s[0]) / (self.t_s.len() - 1) as f64
     }
     /// Number of samples.
@@ -395,6 +398,309 @@ impl CalibrationLog {
     }
 }
 
+/// One sample of a log, in s, N and mm.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Sample {
+    /// Time.
+    pub t_s: f64,
+    /// Rod force.
+    pub force_n: f64,
+    /// Deflection.
+    pub position_mm: f64,
+}
+
+/// The source of the CSV records: the header line, then the rest with comments blanked.
+type Records<R> =
+    csv::Reader<std::io::Chain<std::io::Cursor<Vec<u8>>, WithoutComments<std::io::BufReader<R>>>>;
+
+/// A log read sample by sample: the streaming form of [`read_log`], for logs too long to hold
+/// (a day at 1 kHz is 86 million rows). Memory is constant: one CSV record, the samples of a
+/// filled gap, and the list of gaps.
+///
+/// It yields the samples in order, dropped samples filled in (listed by
+/// [`LogReader::filled`]). Errors end the iteration: a malformed row at once; gaps too long
+/// to fill, and a log too short to use, after the last sample, so that every long gap is named.
+pub struct LogReader<R: Read> {
+    rdr: Records<R>,
+    offset: u64,
+    header_fields: usize,
+    cols: [usize; 3],
+    factors: [f64; 3],
+    names: [String; 3],
+    sampling_tolerance: f64,
+    record: csv::StringRecord,
+    nominal: Option<f64>,
+    previous: Option<Sample>,
+    queued: std::collections::VecDeque<Sample>,
+    long_gaps: Vec<FilledGap>,
+    filled: Vec<FilledGap>,
+    samples: usize,
+    done: bool,
+}
+
+impl<R: Read> std::fmt::Debug for LogReader<R> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LogReader")
+            .field("columns", &self.names)
+            .field("samples", &self.samples)
+            .field("filled", &self.filled.len())
+            .field("done", &self.done)
+            .finish()
+    }
+}
+
+impl<R: Read> LogReader<R> {
+    /// Reads the header (the first line that is not a comment or blank) and finds the mapped
+    /// columns. `sampling_tolerance` is the allowed relative deviation of each interval from
+    /// the first (0.1 = 10 %).
+    pub fn new(reader: R, map: &ColumnMap, sampling_tolerance: f64) -> Result<Self, LogError> {
+        let mut lines = std::io::BufReader::new(reader);
+        // The header is the first line that is not a comment or blank.
+        let mut header_line = 0u64;
+        let mut header_text = Vec::new();
+        loop {
+            header_text.clear();
+            let n = std::io::BufRead::read_until(&mut lines, b'\n', &mut header_text)
+                .map_err(|e| LogError::Io(format!("line {}: {e}", header_line + 1)))?;
+            header_line += 1;
+            if n == 0 {
+                return Err(LogError::Io(format!(
+                    "line {header_line}: no header line (the log is empty or holds only comments); \
+                     expected a header such as t_s,force_n,position_mm"
+                )));
+            }
+            if !is_comment_or_blank(&header_text) {
+                break;
+            }
+        }
+        let header_str = String::from_utf8_lossy(&header_text).into_owned();
+        let delimiter = map.delimiter.byte(&header_str);
+        // The CSV reader sees the header, then the rest with comments blanked; its line numbers
+        // are offset by the lines before the header.
+        let body = WithoutComments {
+            inner: lines,
+            line: Vec::new(),
+            at: 0,
+        };
+        let mut rdr = csv::ReaderBuilder::new()
+            .has_headers(true)
+            .flexible(true)
+            .delimiter(delimiter)
+            .from_reader(std::io::Cursor::new(header_text.clone()).chain(body));
+        let offset = header_line - 1;
+        let header = rdr
+            .headers()
+            .map_err(|e| LogError::Io(format!("line {header_line}: {e}")))?
+            .clone();
+        let columns: Vec<String> = header.iter().map(|h| h.trim().to_string()).collect();
+        let find = |c: &Column, what: &'static str| {
+            let count = columns.iter().filter(|h| **h == c.name).count();
+            if count > 1 {
+                return Err(LogError::DuplicateColumn {
+                    line: header_line,
+                    name: c.name.clone(),
+                    what,
+                    count,
+                });
+            }
+            columns
+                .iter()
+                .position(|h| *h == c.name)
+                .ok_or_else(|| LogError::MissingColumn {
+                    line: header_line,
+                    name: c.name.clone(),
+                    what,
+                    header: header_str.trim_end().to_string(),
+                    columns: columns.clone(),
+                    delimiter: Delimiter::name(delimiter),
+                })
+        };
+        let cols = [
+            find(&map.time, "time")?,
+            find(&map.force, "force")?,
+            find(&map.position, "position")?,
+        ];
+        Ok(LogReader {
+            rdr,
+            offset,
+            header_fields: header.len(),
+            cols,
+            factors: [map.time.factor, map.force.factor, map.position.factor],
+            names: [
+                map.time.name.clone(),
+                map.force.name.clone(),
+                map.position.name.clone(),
+            ],
+            sampling_tolerance,
+            record: csv::StringRecord::new(),
+            nominal: None,
+            previous: None,
+            queued: std::collections::VecDeque::new(),
+            long_gaps: Vec::new(),
+            filled: Vec::new(),
+            samples: 0,
+            done: false,
+        })
+    }
+
+    /// Dropped samples filled in so far.
+    pub fn filled(&self) -> &[FilledGap] {
+        &self.filled
+    }
+
+    /// Bytes of the file read so far (for progress).
+    pub fn bytes_read(&self) -> u64 {
+        self.record.position().map_or(0, |p| p.byte())
+    }
+
+    /// Samples yielded so far, filled ones included.
+    pub fn samples(&self) -> usize {
+        self.samples
+    }
+
+    /// Reads the next record into the queue (with the samples of a filled gap before it);
+    /// `Ok(false)` at the end of the file.
+    fn read_next(&mut self) -> Result<bool, LogError> {
+        match self.rdr.read_record(&mut self.record) {
+            Ok(false) => return Ok(false),
+            Ok(true) => {}
+            Err(e) => {
+                let line = e.position().map_or(0, |p| p.line()) + self.offset;
+                return Err(LogError::Io(format!("line {line}: {e}")));
+            }
+        }
+        let record = &self.record;
+        let line = record.position().map_or(0, |p| p.line()) + self.offset;
+        if record.len() < self.header_fields {
+            return Err(LogError::ShortRow {
+                line,
+                found: record.len(),
+                expected: self.header_fields,
+            });
+        }
+        let mut v = [0.0; 3];
+        for k in 0..3 {
+            let text = record.get(self.cols[k]).unwrap_or("").trim();
+            let x: f64 = text
+                .parse()
+                .ok()
+                .filter(|x: &f64| x.is_finite())
+                .ok_or_else(|| LogError::BadNumber {
+                    line,
+                    column: self.names[k].clone(),
+                    found: text.to_string(),
+                })?;
+            v[k] = x * self.factors[k];
+            // Time may be a clock (epoch seconds); force and position have physical bounds.
+            let limit = if k == 0 { f64::MAX } else { MAX_MAGNITUDE };
+            if !v[k].is_finite() || v[k].abs() >= limit {
+                return Err(LogError::OutOfRange {
+                    line,
+                    column: self.names[k].clone(),
+                    found: text.to_string(),
+                    value: v[k],
+                    unit: ["s", "N", "mm"][k],
+                    limit,
+                });
+            }
+        }
+        let sample = Sample {
+            t_s: v[0],
+            force_n: v[1],
+            position_mm: v[2],
+        };
+        if let Some(prev) = self.previous {
+            let dt = sample.t_s - prev.t_s;
+            if dt <= 0.0 {
+                return Err(LogError::TimeNotIncreasing {
+                    line,
+                    t_s: sample.t_s,
+                    previous_s: prev.t_s,
+                });
+            }
+            let tolerance = self.sampling_tolerance;
+            match self.nominal {
+                None => self.nominal = Some(dt),
+                Some(n) if (dt - n).abs() > tolerance * n => {
+                    // Dropped samples: a whole number of intervals, within the tolerance.
+                    let k = (dt / n).round();
+                    if k < 2.0 || (dt - k * n).abs() > tolerance * n {
+                        return Err(LogError::Irregular {
+                            line,
+                            dt_s: dt,
+                            nominal_s: n,
+                            tolerance_percent: tolerance * 100.0,
+                        });
+                    }
+                    let missing = (k as usize).saturating_sub(1);
+                    let gap = FilledGap {
+                        line,
+                        after_s: prev.t_s,
+                        samples: missing,
+                    };
+                    if missing > MAX_FILLED_SAMPLES {
+                        if self.long_gaps.len() < 100 {
+                            self.long_gaps.push(gap);
+                        }
+                    } else {
+                        for j in 1..=missing {
+                            let a = j as f64 / (missing + 1) as f64;
+                            self.queued.push_back(Sample {
+                                t_s: prev.t_s + a * dt,
+                                force_n: prev.force_n + a * (sample.force_n - prev.force_n),
+                                position_mm: prev.position_mm
+                                    + a * (sample.position_mm - prev.position_mm),
+                            });
+                        }
+                        self.filled.push(gap);
+                    }
+                }
+                Some(_) => {}
+            }
+        }
+        self.previous = Some(sample);
+        self.queued.push_back(sample);
+        Ok(true)
+    }
+}
+
+impl<R: Read> Iterator for LogReader<R> {
+    type Item = Result<Sample, LogError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        if self.queued.is_empty() && !self.done {
+            match self.read_next() {
+                Ok(true) => {}
+                Ok(false) => {
+                    self.done = true;
+                    if !self.long_gaps.is_empty() {
+                        return Some(Err(LogError::Gaps {
+                            gaps: std::mem::take(&mut self.long_gaps),
+                        }));
+                    }
+                    if self.samples < MIN_LOG_SAMPLES {
+                        return Some(Err(LogError::TooShort {
+                            found: self.samples,
+                            needed: MIN_LOG_SAMPLES,
+                        }));
+                    }
+                }
+                Err(e) => {
+                    self.done = true;
+                    self.queued.clear();
+                    return Some(Err(e));
+                }
+            }
+        }
+        let s = self.queued.pop_front()?;
+        self.samples += 1;
+        Some(Ok(s))
+    }
+}
+
+/// The fewest samples a log may have.
+pub const MIN_LOG_SAMPLES: usize = 16;
+
 /// Reads a log. `sampling_tolerance` is the allowed relative deviation of each interval from
 /// the first (0.1 = 10 %). `progress` is called with the bytes read so far.
 ///
@@ -403,192 +709,25 @@ impl CalibrationLog {
 /// (comma, tab or semicolon). An interval of k nominal intervals (within the tolerance) is k - 1
 /// dropped samples: up to [`MAX_FILLED_SAMPLES`] in a row are filled by linear interpolation
 /// and listed in [`CalibrationLog::filled`]; longer gaps are refused, all of them named.
+/// [`LogReader`] reads the same logs sample by sample.
 pub fn read_log<R: Read>(
     reader: R,
     map: &ColumnMap,
     sampling_tolerance: f64,
     mut progress: impl FnMut(u64),
 ) -> Result<CalibrationLog, LogError> {
-    let mut lines = std::io::BufReader::new(reader);
-    // The header is the first line that is not a comment or blank.
-    let mut header_line = 0u64;
-    let mut header_text = Vec::new();
-    loop {
-        header_text.clear();
-        let n = std::io::BufRead::read_until(&mut lines, b'\n', &mut header_text)
-            .map_err(|e| LogError::Io(format!("line {}: {e}", header_line + 1)))?;
-        header_line += 1;
-        if n == 0 {
-            return Err(LogError::Io(format!(
-                "line {header_line}: no header line (the log is empty or holds only comments); \
-                 expected a header such as t_s,force_n,position_mm"
-            )));
-        }
-        if !is_comment_or_blank(&header_text) {
-            break;
-        }
-    }
-    let header_str = String::from_utf8_lossy(&header_text).into_owned();
-    let delimiter = map.delimiter.byte(&header_str);
-    // The CSV reader sees the header, then the rest with comments blanked; its line numbers
-    // are offset by the lines before the header.
-    let body = WithoutComments {
-        inner: lines,
-        line: Vec::new(),
-        at: 0,
-    };
-    let mut rdr = csv::ReaderBuilder::new()
-        .has_headers(true)
-        .flexible(true)
-        .delimiter(delimiter)
-        .from_reader(std::io::Cursor::new(header_text.clone()).chain(body));
-    let offset = header_line - 1;
-    let header = rdr
-        .headers()
-        .map_err(|e| LogError::Io(format!("line {header_line}: {e}")))?
-        .clone();
-    let columns: Vec<String> = header.iter().map(|h| h.trim().to_string()).collect();
-    let find = |c: &Column, what: &'static str| {
-        let count = columns.iter().filter(|h| **h == c.name).count();
-        if count > 1 {
-            return Err(LogError::DuplicateColumn {
-                line: header_line,
-                name: c.name.clone(),
-                what,
-                count,
-            });
-        }
-        columns
-            .iter()
-            .position(|h| *h == c.name)
-            .ok_or_else(|| LogError::MissingColumn {
-                line: header_line,
-                name: c.name.clone(),
-                what,
-                header: header_str.trim_end().to_string(),
-                columns: columns.clone(),
-                delimiter: Delimiter::name(delimiter),
-            })
-    };
-    let cols = [
-        find(&map.time, "time")?,
-        find(&map.force, "force")?,
-        find(&map.position, "position")?,
-    ];
-    let factors = [map.time.factor, map.force.factor, map.position.factor];
-    let names = [&map.time.name, &map.force.name, &map.position.name];
+    let mut reader = LogReader::new(reader, map, sampling_tolerance)?;
     let mut log = CalibrationLog::default();
-    let mut long_gaps: Vec<FilledGap> = Vec::new();
-    let mut record = csv::StringRecord::new();
-    let mut nominal: Option<f64> = None;
-    loop {
-        match rdr.read_record(&mut record) {
-            Ok(false) => break,
-            Ok(true) => {}
-            Err(e) => {
-                let line = e.position().map_or(0, |p| p.line()) + offset;
-                return Err(LogError::Io(format!("line {line}: {e}")));
-            }
-        }
-        let line = record.position().map_or(0, |p| p.line()) + offset;
-        if record.len() < header.len() {
-            return Err(LogError::ShortRow {
-                line,
-                found: record.len(),
-                expected: header.len(),
-            });
-        }
-        let mut v = [0.0; 3];
-        for k in 0..3 {
-            let text = record.get(cols[k]).unwrap_or("").trim();
-            let x: f64 = text
-                .parse()
-                .ok()
-                .filter(|x: &f64| x.is_finite())
-                .ok_or_else(|| LogError::BadNumber {
-                    line,
-                    column: names[k].clone(),
-                    found: text.to_string(),
-                })?;
-            v[k] = x * factors[k];
-            // Time may be a clock (epoch seconds); force and position have physical bounds.
-            let limit = if k == 0 { f64::MAX } else { MAX_MAGNITUDE };
-            if !v[k].is_finite() || v[k].abs() >= limit {
-                return Err(LogError::OutOfRange {
-                    line,
-                    column: names[k].clone(),
-                    found: text.to_string(),
-                    value: v[k],
-                    unit: ["s", "N", "mm"][k],
-                    limit,
-                });
-            }
-        }
-        if let Some(&prev) = log.t_s.last() {
-            let dt = v[0] - prev;
-            if dt <= 0.0 {
-                return Err(LogError::TimeNotIncreasing {
-                    line,
-                    t_s: v[0],
-                    previous_s: prev,
-                });
-            }
-            match nominal {
-                None => nominal = Some(dt),
-                Some(n) if (dt - n).abs() > sampling_tolerance * n => {
-                    // Dropped samples: a whole number of intervals, within the tolerance.
-                    let k = (dt / n).round();
-                    if k < 2.0 || (dt - k * n).abs() > sampling_tolerance * n {
-                        return Err(LogError::Irregular {
-                            line,
-                            dt_s: dt,
-                            nominal_s: n,
-                            tolerance_percent: sampling_tolerance * 100.0,
-                        });
-                    }
-                    let missing = (k as usize).saturating_sub(1);
-                    let gap = FilledGap {
-                        line,
-                        after_s: prev,
-                        samples: missing,
-                    };
-                    if missing > MAX_FILLED_SAMPLES {
-                        if long_gaps.len() < 100 {
-                            long_gaps.push(gap);
-                        }
-                    } else {
-                        let (f0, x0) = (
-                            *log.force_n.last().unwrap_or(&v[1]),
-                            *log.position_mm.last().unwrap_or(&v[2]),
-                        );
-                        for j in 1..=missing {
-                            let a = j as f64 / (missing + 1) as f64;
-                            log.t_s.push(prev + a * dt);
-                            log.force_n.push(f0 + a * (v[1] - f0));
-                            log.position_mm.push(x0 + a * (v[2] - x0));
-                        }
-                        log.filled.push(gap);
-                    }
-                }
-                Some(_) => {}
-            }
-        }
-        log.t_s.push(v[0]);
-        log.force_n.push(v[1]);
-        log.position_mm.push(v[2]);
+    while let Some(sample) = reader.next() {
+        let s = sample?;
+        log.t_s.push(s.t_s);
+        log.force_n.push(s.force_n);
+        log.position_mm.push(s.position_mm);
         if log.t_s.len().is_multiple_of(65_536) {
-            progress(record.position().map_or(0, |p| p.byte()));
+            progress(reader.bytes_read());
         }
     }
-    if !long_gaps.is_empty() {
-        return Err(LogError::Gaps { gaps: long_gaps });
-    }
-    if log.len() < 16 {
-        return Err(LogError::TooShort {
-            found: log.len(),
-            needed: 16,
-        });
-    }
+    log.filled = reader.filled;
     Ok(log)
 }
 

@@ -2,9 +2,15 @@
 //! Coulomb friction taken out of the force, the EKF with its parallel F0, d0 filter, and the
 //! friction put back. The command layer only reads the log and shows progress.
 
-use super::ekf::{self, EkfError, EkfInit, EkfInput, EkfRun, EkfSettings};
-use super::identify::{identify_with_window, Identification, IdentifyError, SensorNoise};
-use super::log::CalibrationLog;
+use std::collections::VecDeque;
+use std::ops::ControlFlow;
+
+use super::ekf::{self, EkfError, EkfInit, EkfRow, EkfRun, EkfSettings};
+use super::identify::{
+    block_for_interval, identify_reduced, Identification, IdentifyError, ReducedLog, Reduction,
+    SensorNoise, MAX_IDENTIFY_SAMPLES,
+};
+use super::log::{CalibrationLog, LogError, Sample};
 use super::sg;
 use crate::model::{ExpLaw, ForceLaw};
 use serde::Serialize;
@@ -100,7 +106,14 @@ pub struct EstimateOptions {
     pub r_position_mm2: Option<f64>,
     /// The log's encoder zero: taken out of the positions before anything else.
     pub position_offset: PositionOffset,
+    /// Identification, the filter's init, uses the first this many seconds of the log (s);
+    /// [`DEFAULT_IDENTIFY_SPAN_S`] by default.
+    pub identify_span_s: f64,
 }
+
+/// The first part of a log that identification, the filter's init, uses by default: an hour
+/// (far more than the parameters need), so that a day-long log's init takes bounded memory.
+pub const DEFAULT_IDENTIFY_SPAN_S: f64 = 3600.0;
 
 impl EstimateOptions {
     /// Identification init, RK4, zero-phase force rate, the given sensors, no overrides.
@@ -116,6 +129,7 @@ impl EstimateOptions {
             p0_std: Vec::new(),
             r_position_mm2: None,
             position_offset: PositionOffset::None,
+            identify_span_s: DEFAULT_IDENTIFY_SPAN_S,
         }
     }
 }
@@ -133,6 +147,8 @@ pub struct EstimateRun {
     pub recovery: Option<String>,
     /// Whether the run's estimates and standard deviations can be trusted.
     pub consistency: Consistency,
+    /// The encoder zero taken out of the log's positions (mm), when one was.
+    pub position_offset_mm: Option<f64>,
 }
 
 /// Why the estimation failed.
@@ -150,101 +166,338 @@ pub enum EstimateError {
          validate SPEC, or with estimate --init SPEC; or give the offset, e.g. --position-offset 0.5mm"
     )]
     OffsetNeedsLaw,
+    /// Produced by [`estimate_stream`] when the log cannot be read again.
+    #[error("{0}")]
+    Log(Box<LogError>),
+    /// Produced by [`estimate_stream`] when the sink stopped the run.
+    #[error("the run was stopped by its output")]
+    Stopped,
 }
 
-/// Removes Coulomb friction `d0_n` from the force: it steps the force at every reversal, and
-/// its derivative is not in the filter's model.
+impl From<LogError> for EstimateError {
+    fn from(e: LogError) -> Self {
+        EstimateError::Log(Box::new(e))
+    }
+}
+
+/// Removes Coulomb friction `d0` from the force as samples arrive: it steps the force at
+/// every reversal, and its derivative is not in the filter's model.
 ///
-/// The sign is that of the motion velocity (Savitzky-Golay over `window` samples, zero phase).
-/// Where the velocity stays within three of its noise standard deviations of zero for longer
-/// than half a window, the spring is at rest and the model's friction is zero. A shorter stay
-/// is a reversal, and the sign follows the velocity's through zero, so the friction's step
-/// falls within a few samples of the true one. What is left near each reversal, a force error
-/// of 2 d0 over those samples, reaches the filter through the force rate: with strong friction
-/// (d0 many times the force noise) the filter's inertia and k2 suffer, and
-/// [`Consistency`] says so.
-fn without_coulomb(
-    log: &CalibrationLog,
-    d0_n: f64,
-    noise: &SensorNoise,
-    window: usize,
-) -> Vec<f64> {
-    let mut force = log.force_n.clone();
-    if d0_n == 0.0 {
-        return force;
-    }
-    let dt = log.dt_s();
-    let diff = sg::Differentiator::new(window);
-    let v = diff.apply(&log.position_mm, dt, sg::MOTION_VELOCITY);
-    let band = 3.0
-        * diff
-            .noise_variance(sg::MOTION_VELOCITY, noise.position_variance_mm2, dt)
-            .sqrt();
-    let n = force.len();
-    // The sign at every sample (edges: the nearest filtered velocity).
-    let velocity = |i: usize| v[i.saturating_sub(diff.half).min(v.len().saturating_sub(1))];
-    let mut sign = vec![0.0; n];
-    if v.is_empty() {
-        return force;
-    }
-    let mut i = 0;
-    while i < n {
-        let vi = velocity(i);
-        if vi.abs() > band {
-            sign[i] = vi.signum();
-            i += 1;
-            continue;
-        }
-        let start = i;
-        while i < n && velocity(i).abs() <= band {
-            i += 1;
-        }
-        let at_rest = i - start > diff.half;
-        for (k, s) in sign.iter_mut().enumerate().take(i).skip(start) {
-            *s = if at_rest { 0.0 } else { velocity(k).signum() };
-        }
-    }
-    for (f, s) in force.iter_mut().zip(&sign) {
-        *f -= d0_n * s;
-    }
-    force
+/// The sign is that of the motion velocity (Savitzky-Golay over identification's window, zero
+/// phase; windows longer than [`COULOMB_KERNEL_POINTS`] samples use every s-th sample, so that
+/// the work per sample stays bounded). Where the velocity stays within three of its noise
+/// standard deviations of zero for longer than half a window, the spring is at rest and the
+/// model's friction is zero. A shorter stay is a reversal, and the sign follows the velocity's
+/// through zero, so the friction's step falls within a few samples of the true one. What is
+/// left near each reversal, a force error of 2 d0 over those samples, reaches the filter
+/// through the force rate: with strong friction (d0 many times the force noise) the filter's
+/// inertia and k2 suffer, and [`Consistency`] says so.
+///
+/// Samples come out in order, lagging the input by at most a window; the first half window
+/// takes the first velocity, the last half window the last one.
+#[derive(Debug, Clone)]
+struct CoulombStage {
+    d0: f64,
+    weights: Vec<f64>,
+    stride: usize,
+    scale: f64,
+    band: f64,
+    reach: usize,
+    positions: VecDeque<f64>,
+    waiting: VecDeque<(usize, Sample)>,
+    last_velocity: Option<f64>,
+    pending: VecDeque<(usize, Sample, f64)>,
+    resting: bool,
+    out: VecDeque<(usize, Sample)>,
 }
 
-/// Runs the EKF over a log; `progress(k, n)` is called as samples are processed.
+/// The most points of the velocity kernel that gives the friction's sign.
+pub const COULOMB_KERNEL_POINTS: usize = 701;
+
+impl CoulombStage {
+    fn new(d0: f64, window: usize, noise: &SensorNoise, dt: f64) -> CoulombStage {
+        let window = window.max(sg::MIN_WINDOW);
+        let stride = window.div_ceil(COULOMB_KERNEL_POINTS).max(1);
+        let diff = sg::Differentiator::new((window / stride) | 1);
+        let band = 3.0
+            * diff
+                .noise_variance(
+                    sg::MOTION_VELOCITY,
+                    noise.position_variance_mm2,
+                    dt * stride as f64,
+                )
+                .sqrt();
+        CoulombStage {
+            d0,
+            weights: diff.weights[sg::MOTION_VELOCITY].clone(),
+            stride,
+            scale: 1.0 / (dt * stride as f64),
+            band,
+            reach: diff.half * stride,
+            positions: VecDeque::new(),
+            waiting: VecDeque::new(),
+            last_velocity: None,
+            pending: VecDeque::new(),
+            resting: false,
+            out: VecDeque::new(),
+        }
+    }
+
+    fn push(&mut self, i: usize, s: Sample) {
+        if self.d0 == 0.0 {
+            self.out.push_back((i, s));
+            return;
+        }
+        let span = 2 * self.reach + 1;
+        self.positions.push_back(s.position_mm);
+        if self.positions.len() > span {
+            self.positions.pop_front();
+        }
+        self.waiting.push_back((i, s));
+        if self.positions.len() < span {
+            return;
+        }
+        let v = self
+            .weights
+            .iter()
+            .enumerate()
+            .map(|(k, w)| w * self.positions[k * self.stride])
+            .sum::<f64>()
+            * self.scale;
+        let centre = i - self.reach;
+        // The first velocity also stands for the samples before its centre.
+        while let Some(&(j, _)) = self.waiting.front() {
+            if j > centre {
+                break;
+            }
+            let (j, sj) = self.waiting.pop_front().unwrap_or((j, s));
+            self.classify(j, sj, v);
+        }
+        self.last_velocity = Some(v);
+    }
+
+    /// The sign of one sample with its velocity: at once when it moves, after its in-band run
+    /// is known to be a rest or a reversal otherwise.
+    fn classify(&mut self, i: usize, s: Sample, v: f64) {
+        if v.abs() > self.band {
+            self.flush_reversal();
+            self.resting = false;
+            self.emit(i, s, v.signum());
+        } else if self.resting {
+            self.emit(i, s, 0.0);
+        } else {
+            self.pending.push_back((i, s, v));
+            if self.pending.len() > self.reach {
+                self.resting = true;
+                while let Some((j, sj, _)) = self.pending.pop_front() {
+                    self.emit(j, sj, 0.0);
+                }
+            }
+        }
+    }
+
+    /// A short in-band run: a reversal, signed by the velocity through zero.
+    fn flush_reversal(&mut self) {
+        while let Some((j, sj, vj)) = self.pending.pop_front() {
+            self.emit(j, sj, vj.signum());
+        }
+    }
+
+    fn emit(&mut self, i: usize, mut s: Sample, sign: f64) {
+        s.force_n -= self.d0 * sign;
+        self.out.push_back((i, s));
+    }
+
+    /// After the last sample: the last half window takes the last velocity (a log shorter than
+    /// a window keeps its force).
+    fn finish(&mut self) {
+        match self.last_velocity {
+            Some(v) => {
+                while let Some((j, sj)) = self.waiting.pop_front() {
+                    self.classify(j, sj, v);
+                }
+                self.flush_reversal();
+            }
+            None => {
+                while let Some((j, sj)) = self.waiting.pop_front() {
+                    self.out.push_back((j, sj));
+                }
+            }
+        }
+    }
+}
+
+/// What a first pass over a log learns before the filter runs: its length and sampling, the
+/// range of its positions, and the samples identification uses ([`Reduction`]). Its memory is
+/// bounded whatever the log's length.
+#[derive(Debug, Clone)]
+pub struct LogSurvey {
+    /// Samples in the log.
+    pub samples: usize,
+    /// Mean sampling interval (s).
+    pub dt_s: f64,
+    /// Smallest and largest position (mm).
+    pub position_range_mm: (f64, f64),
+    /// Identification's samples: block means over the first [`EstimateOptions::identify_span_s`].
+    pub reduced: ReducedLog,
+}
+
+/// The first pass over a log's samples ([`LogSurvey`]): identification keeps the block means
+/// of the first `identify_span_s` seconds (at most [`MAX_IDENTIFY_SAMPLES`]).
+pub fn survey<E>(
+    samples: impl Iterator<Item = Result<Sample, E>>,
+    identify_span_s: f64,
+) -> Result<LogSurvey, E> {
+    let mut reduction: Option<Reduction> = None;
+    let mut first: Option<Sample> = None;
+    let (mut n, mut t_last) = (0usize, f64::NAN);
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for sample in samples {
+        let s = sample?;
+        match (&mut reduction, first) {
+            (Some(r), _) => r.push(s),
+            (None, None) => first = Some(s),
+            (None, Some(f)) => {
+                // The span in block means, once the sampling interval is known.
+                let dt = s.t_s - f.t_s;
+                let block = block_for_interval(dt) as f64;
+                let blocks =
+                    (identify_span_s / (dt * block)).clamp(1.0, MAX_IDENTIFY_SAMPLES as f64);
+                let mut r = Reduction::new(blocks as usize);
+                r.push(f);
+                r.push(s);
+                reduction = Some(r);
+            }
+        }
+        n += 1;
+        t_last = s.t_s;
+        lo = lo.min(s.position_mm);
+        hi = hi.max(s.position_mm);
+    }
+    let t_first = first.map_or(f64::NAN, |f| f.t_s);
+    let reduced = match reduction {
+        Some(r) => r.finish(),
+        None => {
+            let mut r = Reduction::new(1);
+            if let Some(f) = first {
+                r.push(f);
+            }
+            r.finish()
+        }
+    };
+    Ok(LogSurvey {
+        samples: n,
+        dt_s: if n > 1 {
+            (t_last - t_first) / (n - 1) as f64
+        } else {
+            f64::NAN
+        },
+        position_range_mm: (lo, hi),
+        reduced,
+    })
+}
+
+/// Where the filter's rows go as they are computed.
+pub trait RowSink {
+    /// The filter starts again from the first sample (after a divergence): forget the rows.
+    fn restart(&mut self);
+    /// One filtered sample; `Break` stops the run ([`EstimateError::Stopped`]).
+    fn row(&mut self, row: &EkfRow) -> ControlFlow<()>;
+}
+
+/// A sink that keeps every row in memory.
+#[derive(Debug, Default)]
+pub struct CollectRows(pub Vec<EkfRow>);
+
+impl RowSink for CollectRows {
+    fn restart(&mut self) {
+        self.0.clear();
+    }
+    fn row(&mut self, row: &EkfRow) -> ControlFlow<()> {
+        self.0.push(*row);
+        ControlFlow::Continue(())
+    }
+}
+
+/// The samples of a log held in memory.
+fn log_samples(log: &CalibrationLog) -> impl Iterator<Item = Result<Sample, LogError>> + '_ {
+    (0..log.len()).map(|i| {
+        Ok(Sample {
+            t_s: log.t_s[i],
+            force_n: log.force_n[i],
+            position_mm: log.position_mm[i],
+        })
+    })
+}
+
+/// Runs the EKF over a log held in memory, keeping every row in [`EkfRun::rows`];
+/// `progress(k, n)` is called as samples are processed.
 pub fn estimate(
     log: &CalibrationLog,
     opts: &EstimateOptions,
     progress: impl FnMut(usize, usize),
 ) -> Result<EstimateRun, EstimateError> {
-    let shifted;
-    let log = match opts.position_offset {
-        PositionOffset::None => log,
-        PositionOffset::Mm(c) => {
-            let mut l = log.clone();
-            l.shift_position(c);
-            shifted = l;
-            &shifted
-        }
+    let survey = survey(log_samples(log), opts.identify_span_s)?;
+    let mut rows = CollectRows::default();
+    let mut est = estimate_stream(&survey, || Ok(log_samples(log)), opts, &mut rows, progress)?;
+    est.run.rows = rows.0;
+    Ok(est)
+}
+
+/// Runs the EKF over a log read as a stream, twice or more: `survey` is the first pass
+/// ([`survey`]), and `open` gives the samples again from the first for each run of the filter
+/// (a second one after a divergence). Rows go to `sink` as they are computed, so memory is
+/// constant whatever the log's length. `progress(k, n)` is called as samples are processed.
+pub fn estimate_stream<I>(
+    survey: &LogSurvey,
+    mut open: impl FnMut() -> Result<I, LogError>,
+    opts: &EstimateOptions,
+    sink: &mut dyn RowSink,
+    progress: impl FnMut(usize, usize),
+) -> Result<EstimateRun, EstimateError>
+where
+    I: Iterator<Item = Result<Sample, LogError>>,
+{
+    let noise = &opts.noise;
+    if survey.samples < 3 || !survey.dt_s.is_finite() {
+        return Err(EkfError::Input(format!(
+            "{} samples; the filter needs at least 3 with force and position",
+            survey.samples
+        ))
+        .into());
+    }
+    // The encoder zero: taken out of every position, the survey's included.
+    let offset_mm = match opts.position_offset {
+        PositionOffset::None => 0.0,
+        PositionOffset::Mm(c) => c,
         PositionOffset::Auto => {
             let EstimateInit::Law { law, .. } = &opts.init else {
                 return Err(EstimateError::OffsetNeedsLaw);
             };
-            let c = fit_offset_by_identification(log, &opts.noise, &ForceLaw::Exponential(*law))?;
-            let mut l = log.clone();
-            l.shift_position(c);
-            shifted = l;
-            &shifted
+            let id = identify_reduced(&survey.reduced, noise, None)?;
+            let (lo, hi) = survey.position_range_mm;
+            offset_from_identification(&id, &ForceLaw::Exponential(*law), lo, hi)?
         }
     };
+    let shifted;
+    let reduced = if offset_mm != 0.0 {
+        let mut r = survey.reduced.clone();
+        r.log.shift_position(offset_mm);
+        shifted = r;
+        &shifted
+    } else {
+        &survey.reduced
+    };
+    let (lo, hi) = survey.position_range_mm;
     let (mut init, identification, stroke) = match &opts.init {
         EstimateInit::Identify => {
-            let id = identify_with_window(log, &opts.noise, opts.window_s)?;
-            let stroke = log.position_mm.iter().fold(0.0_f64, |m, &x| m.max(x.abs()));
+            let id = identify_reduced(reduced, noise, opts.window_s)?;
+            let stroke = (lo - offset_mm).abs().max((hi - offset_mm).abs());
             (EkfInit::from_identification(&id), Some(id), stroke)
         }
         EstimateInit::Law { law, xmax_mm } => (EkfInit::from_law(law), None, *xmax_mm),
     };
-    let dt = log.dt_s();
+    let dt = survey.dt_s;
     // The inertia's floor keeps the prediction stable: RK4 needs D dt / M and
     // sqrt(sigma / M) dt of order 1 or less, and an inertia below that cannot be resolved at
     // this sampling rate anyway. A held inertia (not resolved by identification) starts there.
@@ -259,15 +512,13 @@ pub fn estimate(
         .as_ref()
         .map_or(sg::window_for_rate(1.0 / dt), |id| {
             // Identification may run on a block-averaged log: its window in this log's samples.
-            ((id.sg_window_s / dt).round().max(sg::MIN_WINDOW as f64) as usize) | 1
+            ((id.sg_window_s / dt)
+                .round()
+                .clamp(sg::MIN_WINDOW as f64, 1e7) as usize)
+                | 1
         });
     let mut settings =
-        ekf::default_settings(&init, &opts.noise, dt, opts.discretization, opts.force_rate);
-    let force = without_coulomb(log, init.d0_n, &opts.noise, window);
-    let first = ekf::force_rate_first_sample(dt, opts.force_rate);
-    let x0 = log.position_mm.get(first).copied().unwrap_or(0.0);
-    let (z0, sigma_std) = ekf::initial_state(&init, x0, stroke);
-    settings.p0_std[ekf::idx::SIGMA] = sigma_std;
+        ekf::default_settings(&init, noise, dt, opts.discretization, opts.force_rate);
     settings.m_floor = settings.m_floor.max(m_floor);
     if let Some(k) = opts.outlier_sigmas {
         settings.outlier_sigmas = k;
@@ -281,21 +532,59 @@ pub fn estimate(
     if let Some(r) = opts.r_position_mm2 {
         settings.r_position_mm2 = r.max(1e-12);
     }
-    let input = |settings: EkfSettings| EkfInput {
-        t_s: &log.t_s,
-        force_n: &force,
-        position_mm: &log.position_mm,
-        force_rate: opts.force_rate,
-        z0,
-        settings,
-        offsets0: [init.f0_n, init.d0_n],
-        offset_memory_s: ekf::OFFSET_MEMORY_S,
+    let start = ekf::Start::Init {
+        init,
+        stroke_mm: stroke,
     };
     let mut progress = progress;
+    // One run of the filter over the whole log, rows to the sink.
+    let mut run_once = |settings: EkfSettings,
+                        sink: &mut dyn RowSink|
+     -> Result<(EkfRun, EkfSettings), EstimateError> {
+        let mut filter = ekf::Filter::new(
+            survey.samples,
+            dt,
+            opts.force_rate,
+            start,
+            settings,
+            [init.f0_n, init.d0_n],
+            ekf::OFFSET_MEMORY_S,
+        )?;
+        let mut coulomb = CoulombStage::new(init.d0_n, window, noise, dt);
+        let mut deliver =
+            |coulomb: &mut CoulombStage, filter: &mut ekf::Filter| -> Result<(), EstimateError> {
+                while let Some((j, sj)) = coulomb.out.pop_front() {
+                    if let Some(mut row) = filter.push(j, sj)? {
+                        // The parallel filter saw the force with the initial d0 taken out.
+                        row.offsets[1] += init.d0_n;
+                        if sink.row(&row).is_break() {
+                            return Err(EstimateError::Stopped);
+                        }
+                        let (k, n) = filter.progress();
+                        if k % 65_536 == 1 {
+                            progress(k - 1, n);
+                        }
+                    }
+                }
+                Ok(())
+            };
+        for (i, sample) in open()?.enumerate() {
+            let mut s = sample?;
+            s.position_mm -= offset_mm;
+            coulomb.push(i, s);
+            deliver(&mut coulomb, &mut filter)?;
+        }
+        coulomb.finish();
+        deliver(&mut coulomb, &mut filter)?;
+        let settings = filter.settings();
+        let mut run = filter.finish()?;
+        run.offset_filter.theta[1] += init.d0_n;
+        Ok((run, settings))
+    };
     let mut recovery = None;
-    let mut run = match ekf::run(input(settings), &mut progress) {
-        Ok(run) => run,
-        Err(EkfError::Diverged { sample, t_s, what }) => {
+    let (run, settings) = match run_once(settings, sink) {
+        Ok(done) => done,
+        Err(EstimateError::Filter(EkfError::Diverged { sample, t_s, what })) => {
             // A poor start: widen what the filter may learn (ten times the initial standard
             // deviations of the impedance states and constants, ten times the process noise
             // of the acceleration) and run again from the start, once.
@@ -310,9 +599,10 @@ pub fn estimate(
                 wide.p0_std[i] *= 10.0;
             }
             wide.q[ekf::idx::XDD] *= 10.0;
-            let run = match ekf::run(input(wide), &mut progress) {
-                Ok(run) => run,
-                Err(second) => {
+            sink.restart();
+            let done = match run_once(wide, sink) {
+                Ok(done) => done,
+                Err(EstimateError::Filter(second)) => {
                     // Report the first divergence: the log's fault is most likely there.
                     return Err(EkfError::Diverged {
                         sample,
@@ -324,22 +614,17 @@ pub fn estimate(
                     }
                     .into());
                 }
+                Err(e) => return Err(e),
             };
             recovery = Some(format!(
                 "the filter diverged at sample {sample} (t = {t_s:.3} s: {what}); it was run again \
                  from the start with ten times the initial standard deviations of sigma, D, M, k2 \
                  and d2 and ten times the process noise of the acceleration, and converged"
             ));
-            settings = wide;
-            run
+            done
         }
-        Err(e) => return Err(e.into()),
+        Err(e) => return Err(e),
     };
-    // The parallel filter saw the force with the initial d0 taken out: add it back.
-    for o in run.offsets.iter_mut() {
-        o[1] += init.d0_n;
-    }
-    run.offset_filter.theta[1] += init.d0_n;
     let consistency = Consistency::new(&run, identification.as_ref());
     Ok(EstimateRun {
         run,
@@ -347,6 +632,7 @@ pub fn estimate(
         identification,
         recovery,
         consistency,
+        position_offset_mm: (offset_mm != 0.0).then_some(offset_mm),
     })
 }
 
@@ -470,6 +756,102 @@ impl Consistency {
 mod tests {
     use super::*;
 
+    /// The friction sign rule written for a whole log at once: the velocity over the window,
+    /// a sample's own sign where it moves, and for each in-band run, zero when it lasts more
+    /// than half a window (a rest) or the velocity's sign otherwise (a reversal).
+    fn batch_without_coulomb(
+        log: &CalibrationLog,
+        d0: f64,
+        noise: &SensorNoise,
+        window: usize,
+    ) -> Vec<f64> {
+        let dt = log.dt_s();
+        let diff = sg::Differentiator::new(window);
+        let v = diff.apply(&log.position_mm, dt, sg::MOTION_VELOCITY);
+        let band = 3.0
+            * diff
+                .noise_variance(sg::MOTION_VELOCITY, noise.position_variance_mm2, dt)
+                .sqrt();
+        let n = log.len();
+        let velocity = |i: usize| v[i.saturating_sub(diff.half).min(v.len() - 1)];
+        let mut sign = vec![0.0; n];
+        let mut i = 0;
+        while i < n {
+            if velocity(i).abs() > band {
+                sign[i] = velocity(i).signum();
+                i += 1;
+                continue;
+            }
+            let start = i;
+            while i < n && velocity(i).abs() <= band {
+                i += 1;
+            }
+            let at_rest = i - start > diff.half;
+            for (k, s) in sign.iter_mut().enumerate().take(i).skip(start) {
+                *s = if at_rest { 0.0 } else { velocity(k).signum() };
+            }
+        }
+        log.force_n
+            .iter()
+            .zip(&sign)
+            .map(|(f, s)| f - d0 * s)
+            .collect()
+    }
+
+    #[test]
+    fn the_streamed_friction_sign_follows_the_batch_rule() {
+        // Ramps with holds (rests) and quick reversals, with position noise.
+        let noise = SensorNoise {
+            force_variance_n2: 1e-3,
+            position_variance_mm2: 1e-4,
+        };
+        let n = 6000;
+        let mut log = CalibrationLog::default();
+        for i in 0..n {
+            let t = i as f64 * 0.01;
+            let phase = (t / 6.0).fract();
+            let x = if phase < 0.4 {
+                5.0 + 4.0 * (std::f64::consts::TAU * t / 3.0).sin()
+            } else {
+                5.0 + 4.0 * (std::f64::consts::TAU * (6.0 * (t / 6.0).floor() + 2.4) / 3.0).sin()
+            };
+            let wiggle = 0.002 * (((i * 7919) % 13) as f64 - 6.0);
+            log.t_s.push(t);
+            log.position_mm.push(x + wiggle);
+            log.force_n.push(10.0 + x);
+        }
+        for window in [41, 241] {
+            let batch = batch_without_coulomb(&log, 2.0, &noise, window);
+            let mut stage = CoulombStage::new(2.0, window, &noise, 0.01);
+            let mut streamed = Vec::new();
+            for (i, s) in log_samples(&log).enumerate() {
+                stage.push(i, s.unwrap_or_default());
+                streamed.extend(stage.out.drain(..));
+            }
+            stage.finish();
+            streamed.extend(stage.out.drain(..));
+            assert_eq!(streamed.len(), n);
+            let (mut rests, mut moving) = (0, 0);
+            for (k, (j, s)) in streamed.iter().enumerate() {
+                assert_eq!(*j, k);
+                assert!(
+                    (s.force_n - batch[k]).abs() < 1e-12,
+                    "window {window}, sample {k}"
+                );
+                if (s.force_n - log.force_n[k]).abs() < 1e-12 {
+                    rests += 1;
+                } else {
+                    moving += 1;
+                }
+            }
+            // Both kinds of samples occur, so the comparison covers both branches.
+            assert!(
+                rests > 1000 && moving > 1000,
+                "{rests} at rest, {moving} moving"
+            );
+        }
+    }
+
     #[test]
     fn state_names_follow_the_state_vector() {
         assert_eq!(StateName::parse("XDD"), Some(StateName::Xdd));
@@ -502,8 +884,19 @@ pub fn fit_offset_by_identification(
     noise: &SensorNoise,
     designed: &ForceLaw,
 ) -> Result<f64, IdentifyError> {
-    use super::identify::{identify, Param};
-    let id = identify(log, noise)?;
+    let id = super::identify::identify(log, noise)?;
+    let (lo, hi) = log.position_range_mm();
+    offset_from_identification(&id, designed, lo, hi)
+}
+
+/// The encoder zero that matches an identified law to a designed one over `lo ..= hi` (mm).
+fn offset_from_identification(
+    id: &Identification,
+    designed: &ForceLaw,
+    lo: f64,
+    hi: f64,
+) -> Result<f64, IdentifyError> {
+    use super::identify::Param;
     let value = |p| id.get(p).value;
     let measured = ExpLaw {
         mu_n: value(Param::Mu).unwrap_or(f64::NAN),
@@ -517,7 +910,6 @@ pub fn fit_offset_by_identification(
                 .into(),
         ));
     }
-    let (lo, hi) = log.position_range_mm();
     Ok(fit_position_offset(&measured, designed, lo, hi))
 }
 

@@ -117,31 +117,88 @@ pub fn check_regular(path: &Path) -> Result<(), ExportError> {
 /// Writes `bytes` to `path` atomically (temporary file in the same folder, then rename).
 /// An existing `path` that is not a regular file is refused.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), ExportError> {
-    check_regular(path)?;
-    let dir = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let wrap = |source| ExportError::Write {
-        path: path.to_path_buf(),
-        source,
-    };
-    std::fs::create_dir_all(dir).map_err(wrap)?;
-    remove_stale_temporaries(dir);
-    let mut builder = tempfile::Builder::new();
-    let prefix = format!("{TMP_PREFIX}{}-", std::process::id());
-    builder.prefix(&prefix).suffix(".tmp");
-    #[cfg(unix)]
-    {
-        // tempfile creates 0600; outputs are ordinary readable files.
-        use std::os::unix::fs::PermissionsExt;
-        builder.permissions(std::fs::Permissions::from_mode(0o644));
+    let mut file = AtomicFile::create(path)?;
+    file.write_all(bytes)?;
+    file.commit()
+}
+
+/// A file written as it is computed (a long time series) and put in place only when complete:
+/// the bytes go to a temporary file in the same folder, renamed over `path` by
+/// [`AtomicFile::commit`]. Dropped without a commit, it leaves `path` as it was.
+#[derive(Debug)]
+pub struct AtomicFile {
+    path: PathBuf,
+    out: std::io::BufWriter<tempfile::NamedTempFile>,
+}
+
+impl AtomicFile {
+    /// Starts the temporary file for `path` (whose folder is created). An existing `path` that
+    /// is not a regular file is refused.
+    pub fn create(path: &Path) -> Result<AtomicFile, ExportError> {
+        check_regular(path)?;
+        let dir = path
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        let wrap = |source| ExportError::Write {
+            path: path.to_path_buf(),
+            source,
+        };
+        std::fs::create_dir_all(dir).map_err(wrap)?;
+        remove_stale_temporaries(dir);
+        let mut builder = tempfile::Builder::new();
+        let prefix = format!("{TMP_PREFIX}{}-", std::process::id());
+        builder.prefix(&prefix).suffix(".tmp");
+        #[cfg(unix)]
+        {
+            // tempfile creates 0600; outputs are ordinary readable files.
+            use std::os::unix::fs::PermissionsExt;
+            builder.permissions(std::fs::Permissions::from_mode(0o644));
+        }
+        let tmp = builder.tempfile_in(dir).map_err(wrap)?;
+        Ok(AtomicFile {
+            path: path.to_path_buf(),
+            out: std::io::BufWriter::with_capacity(1 << 20, tmp),
+        })
     }
-    let mut tmp = builder.tempfile_in(dir).map_err(wrap)?;
-    tmp.write_all(bytes).map_err(wrap)?;
-    tmp.as_file().sync_all().map_err(wrap)?;
-    tmp.persist(path).map_err(|e| wrap(e.error))?;
-    Ok(())
+
+    fn error(&self, source: std::io::Error) -> ExportError {
+        ExportError::Write {
+            path: self.path.clone(),
+            source,
+        }
+    }
+
+    /// Appends bytes.
+    pub fn write_all(&mut self, bytes: &[u8]) -> Result<(), ExportError> {
+        self.out.write_all(bytes).map_err(|e| self.error(e))
+    }
+
+    /// Empties the file, to write it again from its start.
+    pub fn restart(&mut self) -> Result<(), ExportError> {
+        use std::io::Seek;
+        self.out.flush().map_err(|e| self.error(e))?;
+        let file = self.out.get_mut().as_file_mut();
+        file.set_len(0)
+            .and_then(|()| file.rewind())
+            .map_err(|e| ExportError::Write {
+                path: self.path.clone(),
+                source: e,
+            })
+    }
+
+    /// Flushes, syncs and renames the file into place.
+    pub fn commit(self) -> Result<(), ExportError> {
+        let path = self.path;
+        let wrap = |source| ExportError::Write {
+            path: path.clone(),
+            source,
+        };
+        let tmp = self.out.into_inner().map_err(|e| wrap(e.into_error()))?;
+        tmp.as_file().sync_all().map_err(wrap)?;
+        tmp.persist(&path).map_err(|e| wrap(e.error))?;
+        Ok(())
+    }
 }
 
 /// Puts the run's identity into an SVG document as a comment right after its root tag.
@@ -238,4 +295,38 @@ pub fn write_design(
 ) -> Result<Vec<PathBuf>, ExportError> {
     let files = design_files(design, outputs)?;
     folder::write_set(dir, &files, &crate::outputs::ALL_OUTPUTS)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_streamed_file_appears_only_when_committed_and_a_restart_empties_it() {
+        let dir = tempfile::tempdir().expect("temporary folder");
+        let path = dir.path().join("est.csv");
+        std::fs::write(&path, "the previous run\n").expect("write");
+        let mut file = AtomicFile::create(&path).expect("create");
+        file.write_all(b"a first attempt that diverged\n")
+            .expect("write");
+        file.restart().expect("restart");
+        file.write_all(b"t_s\n1.0\n").expect("write");
+        // Until the commit the previous file stands.
+        assert_eq!(
+            std::fs::read_to_string(&path).expect("read"),
+            "the previous run\n"
+        );
+        file.commit().expect("commit");
+        assert_eq!(std::fs::read_to_string(&path).expect("read"), "t_s\n1.0\n");
+        // Dropped without a commit, a file leaves nothing behind.
+        let other = dir.path().join("other.csv");
+        drop(AtomicFile::create(&other).expect("create"));
+        assert!(!other.exists());
+        let left: Vec<_> = std::fs::read_dir(dir.path())
+            .expect("list")
+            .flatten()
+            .map(|e| e.file_name())
+            .collect();
+        assert_eq!(left.len(), 1, "{left:?}");
+    }
 }

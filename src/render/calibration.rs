@@ -6,7 +6,7 @@ use std::fmt::Write as _;
 use serde_json::{json, Map, Value};
 
 use super::plot::{self, Panel, Series};
-use crate::estimate::ekf::{idx, EkfRun, EkfSettings, STATE_NAMES};
+use crate::estimate::ekf::{idx, EkfRow, EkfRun, EkfSettings, STATE_NAMES};
 use crate::estimate::identify::{Identification, Param, SensorNoise, WindowMethod};
 use crate::estimate::log::CalibrationLog;
 use crate::estimate::noise::NoiseModel;
@@ -302,25 +302,38 @@ pub fn format_identification(id: &Identification) -> String {
     s
 }
 
-/// The EKF time series as CSV: `t_s`, each state and its 1-sigma bound, then F0 and d0 from
-/// the parallel filter.
-pub fn estimate_csv(run: &EkfRun) -> Vec<u8> {
-    let mut out = String::with_capacity(run.states.len() * 260 + 512);
-    out.push_str("t_s");
+/// The header line of the EKF time series (est.csv): `t_s`, each state and its 1-sigma
+/// bound, then F0 and d0 from the parallel filter.
+pub fn estimate_csv_header() -> String {
+    let mut out = String::from("t_s");
     for name in STATE_NAMES {
         let _ = write!(out, ",{name},{name}_std");
     }
     out.push_str(",f0_n,f0_n_std,d0_n,d0_n_std\n");
-    for i in 0..run.states.len() {
-        let _ = write!(out, "{:.6}", run.t_s[i]);
-        for k in 0..8 {
-            let _ = write!(out, ",{:.9e},{:.3e}", run.states[i][k], run.stds[i][k]);
-        }
-        let _ = writeln!(
-            out,
-            ",{:.6},{:.3e},{:.6},{:.3e}",
-            run.offsets[i][0], run.offset_stds[i][0], run.offsets[i][1], run.offset_stds[i][1]
-        );
+    out
+}
+
+/// One line of the EKF time series, appended to `out` (rows are written as the filter makes
+/// them: a day-long log's series never is in memory).
+pub fn estimate_csv_row(row: &EkfRow, out: &mut String) {
+    let _ = write!(out, "{:.6}", row.t_s);
+    for k in 0..8 {
+        let _ = write!(out, ",{:.9e},{:.3e}", row.state[k], row.std[k]);
+    }
+    let _ = writeln!(
+        out,
+        ",{:.6},{:.3e},{:.6},{:.3e}",
+        row.offsets[0], row.offset_stds[0], row.offsets[1], row.offset_stds[1]
+    );
+}
+
+/// The EKF time series of a run that kept its rows, as CSV ([`estimate_csv_header`],
+/// [`estimate_csv_row`]).
+pub fn estimate_csv(run: &EkfRun) -> Vec<u8> {
+    let mut out = String::with_capacity(run.rows.len() * 260 + 512);
+    out.push_str(&estimate_csv_header());
+    for row in &run.rows {
+        estimate_csv_row(row, &mut out);
     }
     out.into_bytes()
 }
@@ -344,8 +357,9 @@ pub fn estimate_json(est: &EstimateRun) -> Value {
             "f0_n": f[0], "f0_n_std": fs[0],
             "d0_n": f[1], "d0_n_std": fs[1],
         },
-        "t_end_s": run.t_s.last(),
-        "samples": run.states.len(),
+        "t_end_s": run.t_end_s,
+        "samples": run.samples,
+        "position_offset_mm": est.position_offset_mm,
         "first_sample": run.first_sample,
         "outliers": run.outliers,
         "held": held_states(settings),
@@ -408,8 +422,7 @@ pub fn format_estimate(run: &EkfRun) -> String {
     let _ = writeln!(
         s,
         "EKF over {} samples (to t = {:.3} s); final estimates (1-sigma):",
-        run.states.len(),
-        run.t_s.last().copied().unwrap_or(0.0)
+        run.samples, run.t_end_s
     );
     for (name, k, unit) in [
         ("k2", idx::K2, "1/mm"),
@@ -495,13 +508,12 @@ fn coverage_lines(c: Option<&crate::verdict::validate::Coverage>, offset: Option
 /// `validation.svg`: stiffness against force (scatter and designed line) and the estimates
 /// converging over time.
 pub fn validation_svg(v: &Validation, run: &EkfRun) -> String {
-    let n = run.states.len();
+    let n = run.rows.len();
     let stride = (n / 1500).max(1);
-    let scatter: Vec<(f64, f64)> = run.states[n / 2..]
+    let scatter: Vec<(f64, f64)> = run.rows[n / 2..]
         .iter()
-        .zip(&run.offsets[n / 2..])
         .step_by(stride)
-        .map(|(z, off)| (spring_force_n(z, off), z[idx::SIGMA]))
+        .map(|r| (spring_force_n(&r.state, &r.offsets), r.state[idx::SIGMA]))
         .collect();
     let fmax = scatter.iter().fold(0.0_f64, |m, p| m.max(p.0));
     let fmin = scatter.iter().fold(f64::INFINITY, |m, p| m.min(p.0));
@@ -537,11 +549,10 @@ pub fn validation_svg(v: &Validation, run: &EkfRun) -> String {
         ..Default::default()
     };
     let pct = |k: usize, reference: f64| -> Vec<(f64, f64)> {
-        run.states
+        run.rows
             .iter()
-            .zip(&run.t_s)
             .step_by(stride)
-            .map(|(z, t)| (*t, 100.0 * (z[k] / reference - 1.0)))
+            .map(|r| (r.t_s, 100.0 * (r.state[k] / reference - 1.0)))
             .collect()
     };
     let last = run.last.z;
@@ -551,7 +562,8 @@ pub fn validation_svg(v: &Validation, run: &EkfRun) -> String {
     for p in k2.iter_mut().chain(m.iter_mut()) {
         p.1 = p.1.clamp(-20.0, 20.0);
     }
-    let t_end = run.t_s.last().copied().unwrap_or(0.0);
+    let t_end = run.t_end_s;
+    let t_start = run.rows.first().map_or(0.0, |r| r.t_s);
     let tol = v.criteria.first().map_or(0.0, |c| c.tolerance_percent);
     let convergence = Panel {
         title: "Estimates over time".into(),
@@ -574,14 +586,14 @@ pub fn validation_svg(v: &Validation, run: &EkfRun) -> String {
             },
             Series {
                 label: format!("tolerance +-{tol:.2} %"),
-                points: vec![(run.t_s[0], tol), (t_end, tol)],
+                points: vec![(t_start, tol), (t_end, tol)],
                 color: "#888",
                 dashed: true,
                 dots: false,
             },
             Series {
                 label: String::new(),
-                points: vec![(run.t_s[0], -tol), (t_end, -tol)],
+                points: vec![(t_start, -tol), (t_end, -tol)],
                 color: "#888",
                 dashed: true,
                 dots: false,

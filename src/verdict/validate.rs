@@ -207,9 +207,10 @@ pub fn validate_with(
     };
     // Stiffness against force over the converged half.
     if let Some(run) = run {
-        let n = run.states.len();
+        let n = run.rows.len();
         let (mut num, mut den) = (0.0, 0.0);
-        for (z, off) in run.states[n / 2..].iter().zip(&run.offsets[n / 2..]) {
+        for r in &run.rows[n / 2..] {
+            let (z, off) = (&r.state, &r.offsets);
             let force = spring_force_n(z, off);
             let line = designed.k2_per_mm * (force - designed.f0_n);
             num += (z[idx::SIGMA] - line).powi(2);

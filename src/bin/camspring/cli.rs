@@ -411,6 +411,10 @@ pub struct FilterArgs {
     /// SPEC); a length such as 0.5mm is subtracted from every position.
     #[arg(long, value_name = "auto|LENGTH", default_value = "none", value_parser = position_offset)]
     pub position_offset: PositionOffset,
+    /// Identification, the filter's init, uses the first this much of the log, e.g. 10min
+    /// (a day-long log's init then takes bounded memory and time).
+    #[arg(long, default_value = "1h", value_parser = duration)]
+    pub identify_span: f64,
 }
 
 fn position_offset(text: &str) -> Result<PositionOffset, String> {

@@ -210,6 +210,7 @@ fn filter_options(f: &FilterArgs, s: &Sensors) -> Result<EstimateOptions, Error>
             .collect::<Result<_, _>>()?;
     opts.r_position_mm2 = f.r;
     opts.position_offset = f.position_offset;
+    opts.identify_span_s = f.identify_span;
     app::with_init(opts, &f.init)
 }
 
