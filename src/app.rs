@@ -359,20 +359,19 @@ pub fn load_noise_json(path: &Path) -> Result<crate::estimate::identify::SensorN
     })
 }
 
-/// Runs `camspring identify` on a log file.
+/// Runs `camspring identify` on a log file, read as a stream: only identification's samples
+/// (block means, at most [`crate::estimate::identify::MAX_IDENTIFY_SAMPLES`]) are held.
+/// Returns the identification and the log's sample rate (Hz).
 pub fn run_identify(
     log_path: &Path,
     map: &crate::estimate::log::ColumnMap,
     sampling_tolerance: f64,
     noise: &crate::estimate::identify::SensorNoise,
     window_s: Option<f64>,
-) -> Result<(
-    crate::estimate::identify::Identification,
-    crate::estimate::log::CalibrationLog,
-)> {
-    let log = read_log_file(log_path, map, sampling_tolerance, true)?;
-    let id = crate::estimate::identify::identify_with_window(&log, noise, window_s)?;
-    Ok((id, log))
+) -> Result<(crate::estimate::identify::Identification, f64)> {
+    let surveyed = survey_log_file(log_path, map, sampling_tolerance, f64::INFINITY)?;
+    let id = crate::estimate::identify::identify_reduced(&surveyed.reduced, noise, window_s)?;
+    Ok((id, 1.0 / surveyed.dt_s))
 }
 
 /// Where `camspring estimate` takes the filter's initial state from.
@@ -531,25 +530,25 @@ impl crate::estimate::pipeline::RowSink for EstimateCsv {
     }
 }
 
-/// Runs `camspring estimate`: streams the log twice (a survey with identification's samples,
-/// then the filter), writing the time series CSV (default `<log>.est.csv`) as the filter
-/// goes. Memory is constant whatever the log's length. Returns the run and the path written.
-pub fn run_estimate(
+/// The first pass over a log file ([`crate::estimate::pipeline::survey`]), with a progress
+/// bar: the whole log is checked, and identification's samples from its first
+/// `identify_span_s` seconds are kept. A warning lists dropped samples that were filled.
+pub fn survey_log_file(
     log_path: &Path,
     map: &crate::estimate::log::ColumnMap,
     sampling_tolerance: f64,
-    opts: &EstimateOptions,
-    out: Option<&Path>,
-) -> Result<(EstimateRun, PathBuf)> {
-    use crate::estimate::pipeline::{estimate_stream, survey, EstimateError};
-    // The first pass: the whole log is checked (every error named with its line) before any
-    // output is started.
+    identify_span_s: f64,
+) -> Result<crate::estimate::pipeline::LogSurvey> {
+    use crate::estimate::pipeline::survey;
     let (mut reader, size) = open_log_file(log_path, map, sampling_tolerance)?;
     let bar = progress_bar(
         size,
         8 << 20,
-        "survey {bar:40} {bytes}/{total_bytes} ({bytes_per_sec})",
+        "reading {msg} {bar:40} {bytes}/{total_bytes} ({bytes_per_sec})",
     );
+    if let Some(b) = &bar {
+        b.set_message(log_path.display().to_string());
+    }
     let mut count = 0usize;
     let surveyed = survey(
         std::iter::from_fn(|| {
@@ -562,7 +561,7 @@ pub fn run_estimate(
             }
             next
         }),
-        opts.identify_span_s,
+        identify_span_s,
     );
     if let Some(b) = bar {
         b.finish_and_clear();
@@ -575,7 +574,23 @@ pub fn run_estimate(
     if let Some(w) = filled_warning(&filled) {
         eprintln!("warning: {}: {w}", log_path.display());
     }
-    drop(reader);
+    Ok(surveyed)
+}
+
+/// Runs `camspring estimate`: streams the log twice (a survey with identification's samples,
+/// then the filter), writing the time series CSV (default `<log>.est.csv`) as the filter
+/// goes. Memory is constant whatever the log's length. Returns the run and the path written.
+pub fn run_estimate(
+    log_path: &Path,
+    map: &crate::estimate::log::ColumnMap,
+    sampling_tolerance: f64,
+    opts: &EstimateOptions,
+    out: Option<&Path>,
+) -> Result<(EstimateRun, PathBuf)> {
+    use crate::estimate::pipeline::{estimate_stream, EstimateError};
+    // The first pass: the whole log is checked (every error named with its line) before any
+    // output is started.
+    let surveyed = survey_log_file(log_path, map, sampling_tolerance, opts.identify_span_s)?;
     let out = out
         .map(Path::to_path_buf)
         .unwrap_or_else(|| log_path.with_extension("est.csv"));

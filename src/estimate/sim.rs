@@ -209,91 +209,116 @@ fn moves(levels: &[f64], ramp: f64, hold: f64, t: f64) -> (f64, f64, f64) {
     )
 }
 
-/// Simulates a calibration run of `law` over the stroke `xmax_mm` (force limit `fmax_n`).
-pub fn simulate(
-    law: impl Into<ForceLaw>,
+/// One simulated sample: what the log holds (with noise) and the truth behind it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SimSample {
+    /// The logged sample: time, force and position with sensor noise.
+    pub logged: super::log::Sample,
+    /// True deflection (mm).
+    pub position_mm: f64,
+    /// True rod force (N).
+    pub force_n: f64,
+    /// Generalised stiffness sigma = dF/dx (N/mm).
+    pub sigma_n_per_mm: f64,
+    /// Generalised damping D = d1 + 3 d2 xd^2 (N s/mm).
+    pub d_n_s_per_mm: f64,
+}
+
+/// A calibration run generated sample by sample, for runs too long to hold ([`simulate`]
+/// collects one). The same settings and seed give the same samples.
+#[derive(Debug, Clone)]
+pub struct Simulator {
+    law: ForceLaw,
     xmax_mm: f64,
-    fmax_n: f64,
-    s: &SimSettings,
-) -> Result<(CalibrationLog, Truth), SimError> {
-    let law = &law.into();
-    if !(s.rate_hz > 0.0
-        && s.duration_s > 0.0
-        && s.duration_s * s.rate_hz >= 16.0
-        && s.duration_s * s.rate_hz <= MAX_SAMPLES)
-    {
-        return Err(SimError::Settings(format!(
-            "--duration {} s at --rate {} Hz gives {:.0} samples; expected 16 to {MAX_SAMPLES:.0} \
-             (a log and its truth take about 100 bytes per sample in memory)",
-            s.duration_s,
-            s.rate_hz,
-            s.duration_s * s.rate_hz
-        )));
-    }
-    if !(s.speed.is_finite() && (MIN_SPEED..=MAX_SPEED).contains(&s.speed)) {
-        return Err(SimError::Settings(format!(
-            "--speed {}: expected a factor from {MIN_SPEED} to {MAX_SPEED} (1 is the profile's nominal speed)",
-            s.speed
-        )));
-    }
-    let d = &s.dynamics;
-    for (value, flag, what) in [
-        (d.m_n_s2_per_mm, "--m", "an inertia"),
-        (d.d0_n, "--d0", "a Coulomb friction"),
-        (d.d1_n_s_per_mm, "--d1", "a linear damping"),
-        (s.noise.force_variance_n2, "--force-variance", "a variance"),
-        (
-            s.noise.position_variance_mm2,
-            "--position-variance",
-            "a variance",
-        ),
-    ] {
-        if !(value.is_finite() && value >= 0.0) {
+    limit_n: f64,
+    settings: SimSettings,
+    step_levels: Vec<f64>,
+    rng: StdRng,
+    force_noise: Normal<f64>,
+    position_noise: Normal<f64>,
+}
+
+impl Simulator {
+    /// Checks the settings (any number of samples; [`simulate`] bounds it) and draws the
+    /// profile's random levels.
+    pub fn new(
+        law: impl Into<ForceLaw>,
+        xmax_mm: f64,
+        fmax_n: f64,
+        s: &SimSettings,
+    ) -> Result<Simulator, SimError> {
+        if !(s.rate_hz > 0.0 && s.duration_s > 0.0 && s.duration_s * s.rate_hz >= 16.0) {
             return Err(SimError::Settings(format!(
-                "{flag} {value}: expected {what} of 0 or more"
+                "--duration {} s at --rate {} Hz gives {:.0} samples; expected 16 or more",
+                s.duration_s,
+                s.rate_hz,
+                s.duration_s * s.rate_hz
             )));
         }
+        if !(s.speed.is_finite() && (MIN_SPEED..=MAX_SPEED).contains(&s.speed)) {
+            return Err(SimError::Settings(format!(
+                "--speed {}: expected a factor from {MIN_SPEED} to {MAX_SPEED} (1 is the profile's nominal speed)",
+                s.speed
+            )));
+        }
+        let d = &s.dynamics;
+        for (value, flag, what) in [
+            (d.m_n_s2_per_mm, "--m", "an inertia"),
+            (d.d0_n, "--d0", "a Coulomb friction"),
+            (d.d1_n_s_per_mm, "--d1", "a linear damping"),
+            (s.noise.force_variance_n2, "--force-variance", "a variance"),
+            (
+                s.noise.position_variance_mm2,
+                "--position-variance",
+                "a variance",
+            ),
+        ] {
+            if !(value.is_finite() && value >= 0.0) {
+                return Err(SimError::Settings(format!(
+                    "{flag} {value}: expected {what} of 0 or more"
+                )));
+            }
+        }
+        if !d.d2_n_s3_per_mm3.is_finite() {
+            return Err(SimError::Settings(format!(
+                "--d2 {}: expected a finite cubic damping",
+                d.d2_n_s3_per_mm3
+            )));
+        }
+        let mut rng = StdRng::seed_from_u64(s.seed);
+        let step_levels: Vec<f64> = (0..64)
+            .map(|_| xmax_mm * rng.random_range(0.15..0.85))
+            .collect();
+        let force_noise = Normal::new(0.0, s.noise.force_variance_n2.sqrt())
+            .map_err(|e| SimError::Settings(e.to_string()))?;
+        let position_noise = Normal::new(0.0, s.noise.position_variance_mm2.sqrt())
+            .map_err(|e| SimError::Settings(e.to_string()))?;
+        Ok(Simulator {
+            law: law.into(),
+            xmax_mm,
+            limit_n: fmax_n,
+            settings: *s,
+            step_levels,
+            rng,
+            force_noise,
+            position_noise,
+        })
     }
-    if !d.d2_n_s3_per_mm3.is_finite() {
-        return Err(SimError::Settings(format!(
-            "--d2 {}: expected a finite cubic damping",
-            d.d2_n_s3_per_mm3
-        )));
+
+    /// Samples in the run (duration times rate).
+    pub fn samples(&self) -> usize {
+        (self.settings.duration_s * self.settings.rate_hz).round() as usize
     }
-    let n = (s.duration_s * s.rate_hz).round() as usize;
-    let dt = 1.0 / s.rate_hz;
-    let mut rng = StdRng::seed_from_u64(s.seed);
-    let step_levels: Vec<f64> = (0..64)
-        .map(|_| xmax_mm * rng.random_range(0.15..0.85))
-        .collect();
-    let ramp_levels = [0.15, 0.5, 0.85, 0.3, 0.7, 0.2, 0.6].map(|f| f * xmax_mm);
-    let d = s.dynamics;
-    let force_noise = Normal::new(0.0, s.noise.force_variance_n2.sqrt())
-        .map_err(|e| SimError::Settings(e.to_string()))?;
-    let pos_noise = Normal::new(0.0, s.noise.position_variance_mm2.sqrt())
-        .map_err(|e| SimError::Settings(e.to_string()))?;
-    let mut log = CalibrationLog {
-        t_s: Vec::with_capacity(n),
-        force_n: Vec::with_capacity(n),
-        position_mm: Vec::with_capacity(n),
-        filled: Vec::new(),
-    };
-    let mut truth = Truth {
-        law: law.clone(),
-        dynamics: d,
-        noise: s.noise,
-        settings: *s,
-        sigma_n_per_mm: Vec::with_capacity(n),
-        d_n_s_per_mm: Vec::with_capacity(n),
-        m_n_s2_per_mm: d.m_n_s2_per_mm,
-        position_mm: Vec::with_capacity(n),
-        force_n: Vec::with_capacity(n),
-    };
-    let limit = fmax_n;
-    for i in 0..n {
+
+    /// Sample `i`; samples must be taken in order from 0 (the noise is drawn as they come).
+    pub fn sample(&mut self, i: usize) -> Result<SimSample, SimError> {
+        let s = &self.settings;
+        let xmax_mm = self.xmax_mm;
+        let dt = 1.0 / s.rate_hz;
         // The profile runs on a scaled clock: its velocity scales with `speed`, its
         // acceleration with its square.
         let t = i as f64 * dt * s.speed;
+        let ramp_levels = [0.15, 0.5, 0.85, 0.3, 0.7, 0.2, 0.6].map(|f| f * xmax_mm);
         let (x, xd, xdd) = match s.profile {
             Profile::Sines => {
                 let (w1, w2) = (std::f64::consts::TAU * 0.15, std::f64::consts::TAU * 0.41);
@@ -305,11 +330,12 @@ pub fn simulate(
                 )
             }
             Profile::RampHold => moves(&ramp_levels, 4.0, 2.0, t),
-            Profile::Steps => moves(&step_levels, STEP_RAMP_S, 1.5, t),
+            Profile::Steps => moves(&self.step_levels, STEP_RAMP_S, 1.5, t),
             Profile::Static => (0.5 * xmax_mm, 0.0, 0.0),
         };
         let (xd, xdd) = (xd * s.speed, xdd * s.speed * s.speed);
         let t = i as f64 * dt;
+        let d = s.dynamics;
         if d.d2_n_s3_per_mm3 < 0.0 && 3.0 * d.d2_n_s3_per_mm3.abs() * xd * xd > d.d1_n_s_per_mm {
             return Err(SimError::Settings(format!(
                 "at t = {t:.3} s the {:?} profile moves at {:.2} mm/s, where the damper force \
@@ -334,24 +360,75 @@ pub fn simulate(
             + d.d1_n_s_per_mm * xd
             + d.d2_n_s3_per_mm3 * xd.powi(3)
             + d.d0_n * sgn
-            + law.force_n(x);
-        if !(0.0..=limit).contains(&f) {
+            + self.law.force_n(x);
+        if !(0.0..=self.limit_n).contains(&f) {
             return Err(SimError::ForceOutOfRange {
                 profile: s.profile,
                 force_n: f,
                 t_s: t,
-                limit_n: limit,
+                limit_n: self.limit_n,
             });
         }
-        log.t_s.push(t);
-        log.force_n.push(f + force_noise.sample(&mut rng));
-        log.position_mm.push(x + pos_noise.sample(&mut rng));
-        truth.sigma_n_per_mm.push(law.stiffness_n_per_mm(x));
-        truth
-            .d_n_s_per_mm
-            .push(d.d1_n_s_per_mm + 3.0 * d.d2_n_s3_per_mm3 * xd * xd);
-        truth.position_mm.push(x);
-        truth.force_n.push(f);
+        let force_noise = self.force_noise.sample(&mut self.rng);
+        let position_noise = self.position_noise.sample(&mut self.rng);
+        Ok(SimSample {
+            logged: super::log::Sample {
+                t_s: t,
+                force_n: f + force_noise,
+                position_mm: x + position_noise,
+            },
+            position_mm: x,
+            force_n: f,
+            sigma_n_per_mm: self.law.stiffness_n_per_mm(x),
+            d_n_s_per_mm: d.d1_n_s_per_mm + 3.0 * d.d2_n_s3_per_mm3 * xd * xd,
+        })
+    }
+}
+
+/// Simulates a calibration run of `law` over the stroke `xmax_mm` (force limit `fmax_n`).
+pub fn simulate(
+    law: impl Into<ForceLaw>,
+    xmax_mm: f64,
+    fmax_n: f64,
+    s: &SimSettings,
+) -> Result<(CalibrationLog, Truth), SimError> {
+    if !(s.duration_s * s.rate_hz <= MAX_SAMPLES) {
+        return Err(SimError::Settings(format!(
+            "--duration {} s at --rate {} Hz gives {:.0} samples; expected 16 to {MAX_SAMPLES:.0} \
+             (a log and its truth take about 100 bytes per sample in memory)",
+            s.duration_s,
+            s.rate_hz,
+            s.duration_s * s.rate_hz
+        )));
+    }
+    let mut sim = Simulator::new(law, xmax_mm, fmax_n, s)?;
+    let n = sim.samples();
+    let mut log = CalibrationLog {
+        t_s: Vec::with_capacity(n),
+        force_n: Vec::with_capacity(n),
+        position_mm: Vec::with_capacity(n),
+        filled: Vec::new(),
+    };
+    let mut truth = Truth {
+        law: sim.law.clone(),
+        dynamics: s.dynamics,
+        noise: s.noise,
+        settings: *s,
+        sigma_n_per_mm: Vec::with_capacity(n),
+        d_n_s_per_mm: Vec::with_capacity(n),
+        m_n_s2_per_mm: s.dynamics.m_n_s2_per_mm,
+        position_mm: Vec::with_capacity(n),
+        force_n: Vec::with_capacity(n),
+    };
+    for i in 0..n {
+        let sample = sim.sample(i)?;
+        log.t_s.push(sample.logged.t_s);
+        log.force_n.push(sample.logged.force_n);
+        log.position_mm.push(sample.logged.position_mm);
+        truth.sigma_n_per_mm.push(sample.sigma_n_per_mm);
+        truth.d_n_s_per_mm.push(sample.d_n_s_per_mm);
+        truth.position_mm.push(sample.position_mm);
+        truth.force_n.push(sample.force_n);
     }
     Ok((log, truth))
 }

@@ -8,7 +8,6 @@ use serde_json::{json, Map, Value};
 use super::plot::{self, Panel, Series};
 use crate::estimate::ekf::{idx, EkfRow, EkfRun, EkfSettings, STATE_NAMES};
 use crate::estimate::identify::{Identification, Param, SensorNoise, WindowMethod};
-use crate::estimate::log::CalibrationLog;
 use crate::estimate::noise::NoiseModel;
 use crate::estimate::pipeline::EstimateRun;
 use crate::verdict::validate::{spring_force_n, CurveValidation, Validation};
@@ -142,11 +141,7 @@ pub fn allan_svg(model: &NoiseModel) -> String {
 }
 
 /// `camspring identify --json`: parameters under unit-bearing keys, each with `_std`.
-pub fn identification_json(
-    id: &Identification,
-    noise: &SensorNoise,
-    log: &CalibrationLog,
-) -> Value {
+pub fn identification_json(id: &Identification, noise: &SensorNoise, sample_rate_hz: f64) -> Value {
     let mut params = Map::new();
     for (p, e) in id.parameters.iter() {
         let name = p.key();
@@ -167,7 +162,7 @@ pub fn identification_json(
         "block_samples": id.block_samples,
         "dynamic_samples": id.dynamic_samples,
         "quasi_static_samples": id.quasi_static_samples,
-        "sample_rate_hz": 1.0 / log.dt_s(),
+        "sample_rate_hz": sample_rate_hz,
         "sg_window_samples": id.sg_window,
         "sg_window_s": id.sg_window_s,
         "window_choice": id.window_choice,
@@ -175,6 +170,7 @@ pub fn identification_json(
             "parameter": p.key(), "relative_std": rel, "log_length_factor_for_target": longer,
         })).collect::<Vec<_>>(),
         "filter_bias_std": id.filter_bias_std,
+        "signal_share": id.signal_share,
         "fit": {
             "status": id.adequacy.status,
             "reduced_chi2": id.adequacy.reduced_chi2,

@@ -492,7 +492,8 @@ fn main() -> ExitCode {
             (|| {
                 let map = columns(&c)?;
                 let sensor = sensors(&s)?;
-                let (id, log) = run_identify(&log, &map, c.sampling_tolerance, &sensor, s.window)?;
+                let (id, rate_hz) =
+                    run_identify(&log, &map, c.sampling_tolerance, &sensor, s.window)?;
                 let code = if id.adequacy.status == FitStatus::DoesNotFit {
                     EXIT_CHECK_FAILED
                 } else {
@@ -500,7 +501,7 @@ fn main() -> ExitCode {
                 };
                 Ok(Report::of_checks(
                     format_identification(&id),
-                    to_json(&identification_json(&id, &sensor, &log))?,
+                    to_json(&identification_json(&id, &sensor, rate_hz))?,
                     code,
                 ))
             })(),
