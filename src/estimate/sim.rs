@@ -392,7 +392,8 @@ pub fn simulate(
     fmax_n: f64,
     s: &SimSettings,
 ) -> Result<(CalibrationLog, Truth), SimError> {
-    if !(s.duration_s * s.rate_hz <= MAX_SAMPLES) {
+    let samples = s.duration_s * s.rate_hz;
+    if samples.is_nan() || samples > MAX_SAMPLES {
         return Err(SimError::Settings(format!(
             "--duration {} s at --rate {} Hz gives {:.0} samples; expected 16 to {MAX_SAMPLES:.0} \
              (a log and its truth take about 100 bytes per sample in memory)",
