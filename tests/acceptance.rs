@@ -49,18 +49,23 @@ fn the_acceptance_matrix() {
     // validate passes the true law and fails a law with k2 5 % high, judging through the
     // filter where it is consistent and through identification where it is not.
     let true_fails = out.iter().filter(|o| !o.validate_true).count();
-    assert!(true_fails <= 2, "the true law fails in {true_fails} cases");
+    assert!(true_fails <= 1, "the true law fails in {true_fails} cases");
     for o in &out {
         assert!(!o.validate_off, "a law 5 % off passes: {o}");
     }
-    // The filter does not diverge where Coulomb friction is moderate (d0 below 1 N); where it
-    // diverges, the error names the sample.
+    // The filter never diverges.
     for o in &out {
-        if let Err(e) = &o.ekf {
-            assert!(o.case.row.dynamics.d0_n >= 1.0, "{o}");
-            assert!(e.contains("diverged at sample"), "{e}");
-        }
+        assert!(o.ekf.is_ok(), "{o}");
     }
+    // Strong Coulomb friction (the paper's Table I, d0 3.8 N, and 4 N) no longer leaves it
+    // inconsistent: its sign is read from the force (estimate::pipeline). With the sign from
+    // the velocity alone, 21 of these 24 runs were flagged and 2 diverged.
+    let strong = out.iter().filter(|o| o.case.row.dynamics.d0_n >= 1.0);
+    let flagged = strong.filter(|o| o.ekf_inconsistent.is_some()).count();
+    assert!(
+        flagged <= 3,
+        "{flagged} of 24 runs with strong friction flagged"
+    );
     // Where the filter is consistent and identification resolves the inertia, on the runs
     // with motion (not the slow one), the filter's k2 is within 1 %.
     for o in &out {

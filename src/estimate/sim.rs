@@ -216,6 +216,8 @@ pub struct SimSample {
     pub logged: super::log::Sample,
     /// True deflection (mm).
     pub position_mm: f64,
+    /// True velocity (mm/s): its sign is the Coulomb friction's.
+    pub velocity_mm_per_s: f64,
     /// True rod force (N).
     pub force_n: f64,
     /// Generalised stiffness sigma = dF/dx (N/mm).
@@ -378,6 +380,7 @@ impl Simulator {
                 position_mm: x + position_noise,
             },
             position_mm: x,
+            velocity_mm_per_s: xd,
             force_n: f,
             sigma_n_per_mm: self.law.stiffness_n_per_mm(x),
             d_n_s_per_mm: d.d1_n_s_per_mm + 3.0 * d.d2_n_s3_per_mm3 * xd * xd,
