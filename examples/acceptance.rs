@@ -28,14 +28,15 @@ fn main() {
     }
     let count = |f: &dyn Fn(&matrix::Outcome) -> bool| out.iter().filter(|o| f(o)).count();
     println!(
-        "{} cases: identify meets its bounds (or says it is imprecise, with honest z) in {}, says the model does not fit in {}, imprecise in {}; estimate meets its bounds in {}, misses them but flags itself in {}, misses them unflagged in {}, diverged in {}; validate right in {}",
+        "{} cases: identify meets its bounds (or says it is imprecise, with honest z) in {}, says the model does not fit in {}, imprecise in {}; estimate meets its bounds in {}, misses them but flags itself in {}, misses them but says it is imprecise (honest z) in {}, misses them silently in {}, diverged in {}; validate right in {}",
         out.len(),
         count(&|o| o.identify_ok()),
         count(&|o| o.does_not_fit.is_some()),
         count(&|o| o.imprecise),
         count(&|o| o.estimate_ok()),
         count(&|o| !o.estimate_ok() && o.ekf.is_ok() && o.ekf_inconsistent.is_some()),
-        count(&|o| !o.estimate_ok() && o.ekf.is_ok() && o.ekf_inconsistent.is_none()),
+        count(&|o| !o.estimate_ok() && o.ekf_inconsistent.is_none() && o.estimate_meets_or_says()),
+        count(&|o| o.ekf.is_ok() && !o.estimate_meets_or_says()),
         count(&|o| o.ekf.is_err()),
         count(&|o| o.validate_true && !o.validate_off),
     );

@@ -57,6 +57,15 @@ fn the_acceptance_matrix() {
     for o in &out {
         assert!(o.ekf.is_ok(), "{o}");
     }
+    // It meets its target (k2 within 0.5 %, M within 2 % where identification resolves M,
+    // both within 3 sigma), or says that it does not: flagged not consistent, or a warning that
+    // this log determines k2 or M less precisely, with honest errors. Three runs miss silently,
+    // each by a k2 error of 3.0-3.2 of its standard deviations (docs/CALIBRATION.md).
+    let silent = out.iter().filter(|o| !o.estimate_meets_or_says()).count();
+    assert!(
+        silent <= 4,
+        "{silent} of 72 runs miss the filter's target silently"
+    );
     // Strong Coulomb friction (the paper's Table I, d0 3.8 N, and 4 N) no longer leaves it
     // inconsistent: its sign is read from the force (estimate::pipeline). With the sign from
     // the velocity alone, 21 of these 24 runs were flagged and 2 diverged.

@@ -362,3 +362,38 @@ fn identification_and_the_filter_hold_from_100_hz_to_2_khz() {
         }
     }
 }
+
+/// A short log: the filter warns that it determines k2 or M less precisely than its target
+/// (k2 within 0.5 %, M within 2 %, at 2 sigma), its errors stay within 3 of its standard
+/// deviations, and a log as many times longer as the warning says reaches the target.
+#[test]
+fn estimate_warns_when_the_log_is_too_short_for_its_target_and_says_how_much_longer() {
+    use camspring::estimate::pipeline::estimate;
+    let law = common::paper_law();
+    let d = heavy();
+    let run = |seconds: f64| {
+        let (log, _) = sim(&law, Profile::Steps, seconds, 5, Noise::default());
+        estimate(
+            &log,
+            &options(Noise::default(), Discretization::Rk4),
+            |_, _| {},
+        )
+        .unwrap()
+    };
+    let short = run(30.0);
+    let warned = short.imprecise();
+    assert!(!warned.is_empty(), "30 s of steps meet the target?");
+    let (z, sd) = (short.run.last.z, short.run.last.std());
+    for (k, truth) in [(idx::K2, law.k2_per_mm), (idx::M, d.m_n_s2_per_mm)] {
+        assert!(
+            (z[k] - truth).abs() < 3.0 * sd[k],
+            "state {k}: {} +- {}",
+            z[k],
+            sd[k]
+        );
+    }
+    let longest = warned.iter().map(|w| w.2).fold(1.0, f64::max);
+    assert!(longest < 40.0, "{warned:?}");
+    let long = run(30.0 * longest * 1.5);
+    assert!(long.imprecise().is_empty(), "{:?}", long.imprecise());
+}

@@ -134,6 +134,10 @@ impl EstimateOptions {
     }
 }
 
+/// The filter's target precision, at two standard deviations: k2 within 0.5 % and M within
+/// 2 % (state index, relative bound).
+pub const FILTER_TARGET_PRECISION: [(usize, f64); 2] = [(ekf::idx::K2, 0.005), (ekf::idx::M, 0.02)];
+
 /// What the estimation computed.
 #[derive(Debug, Clone)]
 pub struct EstimateRun {
@@ -172,6 +176,26 @@ pub enum EstimateError {
     /// Produced by [`estimate_stream`] when the sink stopped the run.
     #[error("the run was stopped by its output")]
     Stopped,
+}
+
+impl EstimateRun {
+    /// The filter's constants (k2, and M when it is estimated) whose two standard deviations
+    /// exceed [`FILTER_TARGET_PRECISION`], each with its state name, relative standard
+    /// deviation and how many times longer a log of the same kind would have to be to reach
+    /// the target (the variance falls as 1 / duration).
+    pub fn imprecise(&self) -> Vec<(&'static str, f64, f64)> {
+        let z = self.run.last.z;
+        let sd = self.run.last.std();
+        FILTER_TARGET_PRECISION
+            .iter()
+            .filter(|&&(k, _)| !(self.settings.p0_std[k] == 0.0 && self.settings.q[k] == 0.0))
+            .filter_map(|&(k, target)| {
+                let rel = sd[k] / z[k].abs().max(1e-300);
+                (2.0 * rel > target)
+                    .then(|| (ekf::STATE_NAMES[k], rel, (2.0 * rel / target).powi(2)))
+            })
+            .collect()
+    }
 }
 
 impl From<LogError> for EstimateError {

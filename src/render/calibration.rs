@@ -359,6 +359,9 @@ pub fn estimate_json(est: &EstimateRun) -> Value {
         "first_sample": run.first_sample,
         "outliers": run.outliers,
         "held": held_states(settings),
+        "imprecise": est.imprecise().iter().map(|(state, rel, longer)| json!({
+            "state": state, "relative_std": rel, "log_length_factor_for_target": longer,
+        })).collect::<Vec<_>>(),
         "recovery": est.recovery,
         "consistency": est.consistency,
         "settings": settings,
@@ -387,6 +390,16 @@ pub fn format_consistency(est: &EstimateRun) -> String {
     }
     if let Some(r) = &est.recovery {
         let _ = writeln!(s, "note: {r}");
+    }
+    for (state, rel, longer) in est.imprecise() {
+        let _ = writeln!(
+            s,
+            "warning: the filter determines {state} only to +-{:.2} % (1 sigma) on this log; the \
+             target (k2 within 0.5 %, M within 2 %, at 2 sigma) needs a log about {:.1} times \
+             longer, or one with more motion",
+            100.0 * rel,
+            longer
+        );
     }
     let c = &est.consistency;
     let _ = writeln!(

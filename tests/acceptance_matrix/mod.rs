@@ -103,6 +103,8 @@ pub struct Outcome {
     /// from a divergence.
     pub ekf_inconsistent: Option<String>,
     pub ekf_recovered: bool,
+    /// The filter warns that its k2 or M is less precise than its target.
+    pub ekf_imprecise: bool,
     /// validate of the true law passes, and of a law with k2 5 % high fails.
     pub validate_true: bool,
     pub validate_off: bool,
@@ -129,6 +131,22 @@ impl Outcome {
                 k2.abs() < 0.005
                     && zk.abs() < 3.0
                     && (!self.m_identifiable || (m.abs() < 0.02 && zm.abs() < 3.0))
+            }
+            Err(_) => false,
+        }
+    }
+
+    /// The filter meets its target, or says that it does not: it flags itself not consistent,
+    /// or it warns that this log determines its k2 or M less precisely than the target, with
+    /// errors within 3 of its standard deviations (honest).
+    pub fn estimate_meets_or_says(&self) -> bool {
+        match self.ekf {
+            Ok((_, _, zk, zm)) => {
+                self.estimate_ok()
+                    || self.ekf_inconsistent.is_some()
+                    || (self.ekf_imprecise
+                        && zk.abs() < 3.0
+                        && (!self.m_identifiable || zm.abs() < 3.0))
             }
             Err(_) => false,
         }
@@ -164,11 +182,16 @@ impl fmt::Display for Outcome {
         match &self.ekf {
             Ok((k2, m, zk, zm)) => write!(
                 f,
-                "| ekf k2 {:+.3}% (z {zk:+.1}) M {:+.2}% (z {zm:+.1}){}{}{} ",
+                "| ekf k2 {:+.3}% (z {zk:+.1}) M {:+.2}% (z {zm:+.1}){}{}{}{} ",
                 100.0 * k2,
                 100.0 * m,
                 if self.m_identifiable { "" } else { " [M n.i.]" },
                 if self.ekf_recovered { " RECOVERED" } else { "" },
+                if self.ekf_imprecise {
+                    " EKF-IMPRECISE"
+                } else {
+                    ""
+                },
                 if self.ekf_inconsistent.is_some() {
                     " FLAGGED"
                 } else {
@@ -213,6 +236,7 @@ pub fn run_case(case: &Case) -> Outcome {
         ekf: Err("not run".into()),
         ekf_inconsistent: None,
         ekf_recovered: false,
+        ekf_imprecise: false,
         validate_true: false,
         validate_off: false,
         error: None,
@@ -266,6 +290,7 @@ pub fn run_case(case: &Case) -> Outcome {
     };
     let id = run.identification.as_ref().expect("identified");
     outcome.ekf_recovered = run.recovery.is_some();
+    outcome.ekf_imprecise = !run.imprecise().is_empty();
     if !run.consistency.consistent {
         outcome.ekf_inconsistent = Some(run.consistency.reasons.join("; "));
     }
