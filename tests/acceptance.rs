@@ -39,11 +39,11 @@ fn the_acceptance_matrix() {
         // Its standard deviations are honest: no estimate 5 of them off...
         assert!(o.worst_z.0 < 5.0, "{o}");
     }
-    // ...and few beyond 3 (the inertia on fast runs of the heaviest transmissions carries a
-    // filter bias of up to about 5 of its small standard deviations; docs/CALIBRATION.md).
+    // ...and few beyond 3: one (F0 at 3.4). Before the filter's bias was counted as twice the
+    // change from the next shorter window, six were (m on the heavy rows' sines up to 4.9).
     let beyond_3 = out.iter().filter(|o| o.worst_z.0 >= 3.0).count();
     assert!(
-        beyond_3 <= 8,
+        beyond_3 <= 2,
         "{beyond_3} of 72 cases have an estimate beyond 3 sigma"
     );
     // validate passes the true law and fails a law with k2 5 % high, judging through the
@@ -59,11 +59,11 @@ fn the_acceptance_matrix() {
     }
     // It meets its target (k2 within 0.5 %, M within 2 % where identification resolves M,
     // both within 3 sigma), or says that it does not: flagged not consistent, or a warning that
-    // this log determines k2 or M less precisely, with honest errors. Three runs miss silently,
-    // each by a k2 error of 3.0-3.2 of its standard deviations (docs/CALIBRATION.md).
+    // this log determines k2 or M less precisely, with honest errors. Five runs miss silently,
+    // each by a k2 error of 3.0-3.7 of its standard deviations (docs/CALIBRATION.md).
     let silent = out.iter().filter(|o| !o.estimate_meets_or_says()).count();
     assert!(
-        silent <= 4,
+        silent <= 6,
         "{silent} of 72 runs miss the filter's target silently"
     );
     // Strong Coulomb friction (the paper's Table I, d0 3.8 N, and 4 N) no longer leaves it

@@ -35,6 +35,12 @@ pub const BALANCING_SIGMAS: f64 = 3.0;
 /// and mu 3 of their standard deviations off, and the balancing principle, trusting it, kept it.
 pub const MIN_SIGNAL_SHARE: f64 = 0.25;
 
+/// The filter's bias at the chosen window, per change of the estimate from the next shorter
+/// window: 1 / (1 - 2^(-p/2)) for a bias growing as the window to the power p, with p = 2.
+/// Counting the change once left m on the heavy acceptance rows' sines up to 4.9 standard
+/// deviations off (docs/CALIBRATION.md).
+pub const BIAS_PER_CHANGE: f64 = 2.0;
+
 /// How the Savitzky-Golay window was chosen.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "kebab-case")]
@@ -232,11 +238,13 @@ pub fn choose_window(
 
 /// Adds an estimate of the filter's bias to the chosen window's variances.
 ///
-/// The distortion of a Savitzky-Golay filter grows as a high power of its window, so most of the
-/// bias at the chosen window shows as the change from the next shorter one. That change also
-/// carries noise, of variance about s_short^2 - s_chosen^2; what exceeds it,
-/// max(0, change^2 - (s_short^2 - s_chosen^2)), is counted as systematic and added to the
-/// parameter's variance (`filter_bias_std`). On a log the filter follows, it is zero on average.
+/// The distortion of a Savitzky-Golay filter grows as a power p of its window, so the bias at
+/// the chosen window shows in the change from the next shorter one (sqrt(2) shorter): the change
+/// is the bias times 1 - 2^(-p/2), half of it for p = 2, so the bias is taken as twice the
+/// change ([`BIAS_PER_CHANGE`]). The change also carries noise, of variance about
+/// s_short^2 - s_chosen^2; what the bias's square exceeds it by is counted as systematic and
+/// added to the parameter's variance (`filter_bias_std`). On a log the filter follows, it is
+/// zero on average.
 fn add_filter_bias(id: &mut Identification, shorter: &Estimates) {
     let names = id.covariance_parameters.clone();
     for p in Param::ALL {
@@ -245,7 +253,7 @@ fn add_filter_bias(id: &mut Identification, shorter: &Estimates) {
             continue;
         };
         let noise = (sa * sa - sb * sb).max(0.0);
-        let systematic = ((va - vb).powi(2) - noise).max(0.0);
+        let systematic = ((BIAS_PER_CHANGE * (va - vb)).powi(2) - noise).max(0.0);
         if systematic == 0.0 {
             continue;
         }
