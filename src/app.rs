@@ -494,6 +494,9 @@ struct EstimateCsv {
     file: Option<crate::export::AtomicFile>,
     line: String,
     error: Option<crate::export::ExportError>,
+    /// Every this many rows one is written; `rows` counts them since the (re)start.
+    every: u64,
+    rows: u64,
 }
 
 impl EstimateCsv {
@@ -522,10 +525,16 @@ impl crate::estimate::pipeline::RowSink for EstimateCsv {
                 self.file = None;
             }
         }
+        self.rows = 0;
         let _ = self.write(|l| l.push_str(&crate::render::calibration::estimate_csv_header()));
     }
 
     fn row(&mut self, row: &crate::estimate::ekf::EkfRow) -> std::ops::ControlFlow<()> {
+        let keep = self.rows.is_multiple_of(self.every);
+        self.rows += 1;
+        if !keep {
+            return std::ops::ControlFlow::Continue(());
+        }
         self.write(|l| crate::render::calibration::estimate_csv_row(row, l))
     }
 }
@@ -579,13 +588,15 @@ pub fn survey_log_file(
 
 /// Runs `camspring estimate`: streams the log twice (a survey with identification's samples,
 /// then the filter), writing the time series CSV (default `<log>.est.csv`) as the filter
-/// goes. Memory is constant whatever the log's length. Returns the run and the path written.
+/// goes, every `every`-th filtered sample (1: all). Memory is constant whatever the log's
+/// length. Returns the run and the path written.
 pub fn run_estimate(
     log_path: &Path,
     map: &crate::estimate::log::ColumnMap,
     sampling_tolerance: f64,
     opts: &EstimateOptions,
     out: Option<&Path>,
+    every: u64,
 ) -> Result<(EstimateRun, PathBuf)> {
     use crate::estimate::pipeline::{estimate_stream, EstimateError};
     // The first pass: the whole log is checked (every error named with its line) before any
@@ -598,6 +609,8 @@ pub fn run_estimate(
         file: Some(crate::export::AtomicFile::create(&out)?),
         line: String::with_capacity(512),
         error: None,
+        every: every.max(1),
+        rows: 0,
     };
     let _ = csv.write(|l| l.push_str(&crate::render::calibration::estimate_csv_header()));
     let bar = progress_bar(

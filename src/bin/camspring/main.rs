@@ -510,12 +510,13 @@ fn main() -> ExitCode {
         Command::Estimate {
             log,
             out,
+            every,
             json,
             calibration,
         } => emit(
             (|| {
                 let (map, tol, opts) = calibration_options(&calibration)?;
-                let (est, path) = run_estimate(&log, &map, tol, &opts, out.as_deref())?;
+                let (est, path) = run_estimate(&log, &map, tol, &opts, out.as_deref(), every)?;
                 let code = if est.consistency.consistent {
                     EXIT_OK
                 } else {
