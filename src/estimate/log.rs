@@ -1,8 +1,9 @@
 //! Calibration logs: CSV with a header, columns for time, force and position.
 //!
 //! The default columns are `t_s,force_n,position_mm`; other names and units are mapped with
-//! [`ColumnMap`] (`--time t --force F:lbf --position x:in`). The reader streams the file
-//! record by record and keeps only the three columns, so hour-long kHz logs are read once.
+//! [`ColumnMap`] (`--time t --force F:lbf --position x:in`). [`LogReader`] streams the file
+//! sample by sample in constant memory (what `identify` and `estimate` use); [`read_log`]
+//! collects it into a [`CalibrationLog`].
 //! Every error names the line and what was expected: a malformed or non-finite number, a
 //! missing column, time that does not increase, or a sampling interval that differs from the
 //! first one by more than the stated tolerance (a gap or irregular sampling).

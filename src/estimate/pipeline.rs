@@ -1,6 +1,11 @@
 //! The paper's on-line estimation as one call: initial state from identification (or a law),
-//! Coulomb friction taken out of the force, the EKF with its parallel F0, d0 filter, and the
-//! friction put back. The command layer only reads the log and shows progress.
+//! Coulomb friction taken out of the force (its sign read from the force), the EKF with its
+//! parallel F0, d0 filter, and the friction put back.
+//!
+//! It runs on a log held in memory ([`estimate`]) or on a stream of samples read twice
+//! ([`survey`], then [`estimate_stream`]), with the rows going to a [`RowSink`] as they are
+//! computed: memory is then constant whatever the log's length. The command layer only opens
+//! the log, writes the rows and shows progress.
 
 use std::collections::VecDeque;
 use std::ops::ControlFlow;
