@@ -232,60 +232,41 @@ pub fn read_log_file(
     sampling_tolerance: f64,
     progress: bool,
 ) -> Result<crate::estimate::log::CalibrationLog> {
-    let (mut reader, size) = open_log_file(path, map, sampling_tolerance)?;
-    let bar = progress
-        .then(|| {
-            progress_bar(
-                size,
-                8 << 20,
-                "reading {msg} {bar:40} {bytes}/{total_bytes} ({bytes_per_sec})",
-            )
-        })
-        .flatten();
-    if let Some(b) = &bar {
-        b.set_message(path.display().to_string());
-    }
-    let mut log = crate::estimate::log::CalibrationLog::default();
-    let mut failure = None;
-    while let Some(sample) = reader.next() {
-        match sample {
-            Ok(s) => {
-                log.t_s.push(s.t_s);
-                log.force_n.push(s.force_n);
-                log.position_mm.push(s.position_mm);
-                if log.t_s.len().is_multiple_of(65_536) {
-                    if let Some(b) = &bar {
-                        b.set_position(reader.bytes_read());
-                    }
-                }
-            }
-            Err(e) => {
-                failure = Some(e);
-                break;
-            }
+    let (reader, size) = open_log_file(path, map, sampling_tolerance)?;
+    let bar = progress.then(|| reading_bar(path, size)).flatten();
+    let result = crate::estimate::log::collect_log(reader, |bytes| {
+        if let Some(b) = &bar {
+            b.set_position(bytes);
         }
-    }
+    });
     if let Some(b) = bar {
         b.finish_and_clear();
     }
-    if let Some(e) = failure {
-        return Err(log_error(path, e));
-    }
-    log.filled = reader.filled().to_vec();
-    if let Some(w) = filled_warning(&log) {
+    let log = result.map_err(|e| log_error(path, e))?;
+    if let Some(w) = filled_warning(&log.filled) {
         eprintln!("warning: {}: {w}", path.display());
     }
     Ok(log)
 }
 
+/// The progress bar of reading a log file of `size` bytes (None off a terminal).
+fn reading_bar(path: &Path, size: u64) -> Option<indicatif::ProgressBar> {
+    let bar = progress_bar(
+        size,
+        8 << 20,
+        "reading {msg} {bar:40} {bytes}/{total_bytes} ({bytes_per_sec})",
+    )?;
+    bar.set_message(path.display().to_string());
+    Some(bar)
+}
+
 /// The warning for dropped samples that the reader filled, listing them (the first ten).
-pub fn filled_warning(log: &crate::estimate::log::CalibrationLog) -> Option<String> {
-    if log.filled.is_empty() {
+pub fn filled_warning(filled: &[crate::estimate::log::FilledGap]) -> Option<String> {
+    if filled.is_empty() {
         return None;
     }
-    let total: usize = log.filled.iter().map(|g| g.samples).sum();
-    let list: Vec<String> = log
-        .filled
+    let total: usize = filled.iter().map(|g| g.samples).sum();
+    let list: Vec<String> = filled
         .iter()
         .take(10)
         .map(|g| {
@@ -297,9 +278,9 @@ pub fn filled_warning(log: &crate::estimate::log::CalibrationLog) -> Option<Stri
         .collect();
     Some(format!(
         "{total} dropped sample(s) in {} gap(s) filled by linear interpolation: {}{}",
-        log.filled.len(),
+        filled.len(),
         list.join(", "),
-        if log.filled.len() > 10 { ", ..." } else { "" }
+        if filled.len() > 10 { ", ..." } else { "" }
     ))
 }
 
@@ -550,14 +531,7 @@ pub fn survey_log_file(
 ) -> Result<crate::estimate::pipeline::LogSurvey> {
     use crate::estimate::pipeline::survey;
     let (mut reader, size) = open_log_file(log_path, map, sampling_tolerance)?;
-    let bar = progress_bar(
-        size,
-        8 << 20,
-        "reading {msg} {bar:40} {bytes}/{total_bytes} ({bytes_per_sec})",
-    );
-    if let Some(b) = &bar {
-        b.set_message(log_path.display().to_string());
-    }
+    let bar = reading_bar(log_path, size);
     let mut count = 0usize;
     let surveyed = survey(
         std::iter::from_fn(|| {
@@ -576,11 +550,7 @@ pub fn survey_log_file(
         b.finish_and_clear();
     }
     let surveyed = surveyed.map_err(|e| log_error(log_path, e))?;
-    let filled = crate::estimate::log::CalibrationLog {
-        filled: reader.filled().to_vec(),
-        ..Default::default()
-    };
-    if let Some(w) = filled_warning(&filled) {
+    if let Some(w) = filled_warning(reader.filled()) {
         eprintln!("warning: {}: {w}", log_path.display());
     }
     Ok(surveyed)

@@ -715,9 +715,17 @@ pub fn read_log<R: Read>(
     reader: R,
     map: &ColumnMap,
     sampling_tolerance: f64,
+    progress: impl FnMut(u64),
+) -> Result<CalibrationLog, LogError> {
+    collect_log(LogReader::new(reader, map, sampling_tolerance)?, progress)
+}
+
+/// Reads the rest of a [`LogReader`] into a [`CalibrationLog`], with the gaps it filled;
+/// `progress` is called with the bytes read so far.
+pub fn collect_log<R: Read>(
+    mut reader: LogReader<R>,
     mut progress: impl FnMut(u64),
 ) -> Result<CalibrationLog, LogError> {
-    let mut reader = LogReader::new(reader, map, sampling_tolerance)?;
     let mut log = CalibrationLog::default();
     while let Some(sample) = reader.next() {
         let s = sample?;

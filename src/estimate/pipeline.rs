@@ -247,7 +247,7 @@ impl FrictionlessModel {
 /// velocity is clearly away from zero (beyond three of its noise standard deviations), the
 /// spring cannot be moving the other way, so only that direction or rest is allowed (rest,
 /// because the zero-phase window smears a start half a window back in time). Without a model
-/// (an init from a law), the velocity's own sign is used, and zero within the band.
+/// (an init from a law, which has no friction) samples pass through.
 ///
 /// Samples come out in order, lagging the input by half a window; the first half window takes
 /// the first smoothed values, the last half window the last ones.
@@ -265,9 +265,6 @@ struct CoulombStage {
     positions: VecDeque<f64>,
     waiting: VecDeque<(usize, Sample)>,
     last: Option<[f64; 3]>,
-    /// Without a model: the in-band run held back (sample, velocity), and whether it is a rest.
-    pending: VecDeque<(usize, Sample, f64)>,
-    resting: bool,
     out: VecDeque<(usize, Sample)>,
 }
 
@@ -343,14 +340,12 @@ impl CoulombStage {
             positions: VecDeque::new(),
             waiting: VecDeque::new(),
             last: None,
-            pending: VecDeque::new(),
-            resting: false,
             out: VecDeque::new(),
         }
     }
 
     fn push(&mut self, i: usize, s: Sample) {
-        if self.d0 == 0.0 {
+        if self.d0 == 0.0 || self.model.is_none() {
             self.out.push_back((i, s));
             return;
         }
@@ -389,7 +384,8 @@ impl CoulombStage {
     fn emit(&mut self, i: usize, s: Sample, [x, v, a]: [f64; 3]) {
         let moving = if v.abs() > self.band { v.signum() } else { 0.0 };
         let sign = match self.model {
-            None => return self.by_velocity(i, s, v),
+            // Unreached: without a model the stage passes samples through.
+            None => 0.0,
             Some(model) => {
                 // The most probable sign given what is left of the force, with the velocity
                 // as the prior: where it is clearly away from zero the spring most likely
@@ -416,34 +412,6 @@ impl CoulombStage {
         self.subtract(i, s, sign);
     }
 
-    /// The sign by the velocity alone: its own where it lies beyond the band; within it, zero
-    /// for a run longer than half a window (a rest), the velocity's through zero for a shorter
-    /// one (a reversal).
-    fn by_velocity(&mut self, i: usize, s: Sample, v: f64) {
-        if v.abs() > self.band {
-            self.flush_reversal();
-            self.resting = false;
-            self.subtract(i, s, v.signum());
-        } else if self.resting {
-            self.subtract(i, s, 0.0);
-        } else {
-            self.pending.push_back((i, s, v));
-            if self.pending.len() > self.reach {
-                self.resting = true;
-                while let Some((j, sj, _)) = self.pending.pop_front() {
-                    self.subtract(j, sj, 0.0);
-                }
-            }
-        }
-    }
-
-    /// A short in-band run: a reversal, signed by the velocity through zero.
-    fn flush_reversal(&mut self) {
-        while let Some((j, sj, vj)) = self.pending.pop_front() {
-            self.subtract(j, sj, vj.signum());
-        }
-    }
-
     fn subtract(&mut self, i: usize, mut s: Sample, sign: f64) {
         s.force_n -= self.d0 * sign;
         self.out.push_back((i, s));
@@ -457,7 +425,6 @@ impl CoulombStage {
                 while let Some((j, sj)) = self.waiting.pop_front() {
                     self.emit(j, sj, smoothed);
                 }
-                self.flush_reversal();
             }
             None => {
                 while let Some((j, sj)) = self.waiting.pop_front() {

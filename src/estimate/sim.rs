@@ -235,6 +235,7 @@ pub struct Simulator {
     limit_n: f64,
     settings: SimSettings,
     step_levels: Vec<f64>,
+    ramp_levels: [f64; 7],
     rng: StdRng,
     force_noise: Normal<f64>,
     position_noise: Normal<f64>,
@@ -301,6 +302,7 @@ impl Simulator {
             limit_n: fmax_n,
             settings: *s,
             step_levels,
+            ramp_levels: [0.15, 0.5, 0.85, 0.3, 0.7, 0.2, 0.6].map(|f| f * xmax_mm),
             rng,
             force_noise,
             position_noise,
@@ -320,7 +322,6 @@ impl Simulator {
         // The profile runs on a scaled clock: its velocity scales with `speed`, its
         // acceleration with its square.
         let t = i as f64 * dt * s.speed;
-        let ramp_levels = [0.15, 0.5, 0.85, 0.3, 0.7, 0.2, 0.6].map(|f| f * xmax_mm);
         let (x, xd, xdd) = match s.profile {
             Profile::Sines => {
                 let (w1, w2) = (std::f64::consts::TAU * 0.15, std::f64::consts::TAU * 0.41);
@@ -331,7 +332,7 @@ impl Simulator {
                     -a1 * w1 * w1 * (w1 * t).sin() - a2 * w2 * w2 * (w2 * t + 1.0).sin(),
                 )
             }
-            Profile::RampHold => moves(&ramp_levels, 4.0, 2.0, t),
+            Profile::RampHold => moves(&self.ramp_levels, 4.0, 2.0, t),
             Profile::Steps => moves(&self.step_levels, STEP_RAMP_S, 1.5, t),
             Profile::Static => (0.5 * xmax_mm, 0.0, 0.0),
         };
