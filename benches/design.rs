@@ -86,10 +86,14 @@ fn benches(c: &mut Criterion) {
             )
         })
     });
+    let svg = drawing::drawing_svg(&d, &part);
+    c.bench_function("drawing_pdf (svg2pdf, embedded font)", |b| {
+        b.iter(|| drawing::drawing_pdf(black_box(&svg)).unwrap())
+    });
     c.bench_function("gcode (passes + program, 1 um, arcs)", |b| {
         b.iter(|| {
-            let (passes, summary) = camspring::toolpath::passes(black_box(&d), &part).unwrap();
-            camspring::toolpath::gcode::write(&d, &passes, &summary)
+            let (jobs, summary) = camspring::toolpath::jobs(black_box(&d), &part).unwrap();
+            camspring::toolpath::gcode::write(&d, &jobs, &summary)
         })
     });
     // A failing design: the advice searches re-synthesise the curve many times.

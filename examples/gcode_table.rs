@@ -11,7 +11,7 @@
 use camspring::design::design;
 use camspring::part::build;
 use camspring::toolpath::path::sample_move;
-use camspring::toolpath::{gcode, passes};
+use camspring::toolpath::{gcode, jobs};
 use camspring::{spec::DEFAULT_SPEC_TOML, Spec};
 
 fn main() {
@@ -40,14 +40,18 @@ fn main() {
             spec.machining.arcs = arcs;
             let d = design(&spec).unwrap();
             let part = build(&d).unwrap();
-            let (ps, summary) = passes(&d, &part).unwrap();
-            let (_, blocks) = gcode::write(&d, &ps, &summary);
-            let finish = ps.iter().find(|p| p.finishing).unwrap();
+            let (js, summary) = jobs(&d, &part).unwrap();
+            let (_, blocks) = gcode::write(&d, &js, &summary);
+            let finish = js
+                .iter()
+                .flat_map(|j| &j.passes)
+                .find(|p| p.finishing && p.label.starts_with("outline"))
+                .unwrap();
             let radius = spec.machining.tool_diameter_mm / 2.0;
             let mut from = finish.entry;
             let mut worst = 0.0_f64;
-            let contour = finish.lead_in..finish.moves.len() - finish.lead_out;
-            for (k, m) in finish.moves.iter().enumerate() {
+            let contour = finish.ramp + finish.lead_in..finish.steps.len() - finish.lead_out;
+            for (k, m) in finish.steps.iter().map(|s| &s.mv).enumerate() {
                 if contour.contains(&k) {
                     for q in sample_move(from, m, 32) {
                         worst = worst.max((dist(q) - radius).abs());

@@ -13,7 +13,7 @@ use crate::law::Residuals;
 use crate::model::{Dialect, ForceLaw, FrictionCorrection, Spec, SpringArrangement};
 use crate::part::mesh::{self, StlError};
 use crate::part::{self, Part, PartError};
-use crate::toolpath::{self, Pass, ToolpathError, ToolpathSummary};
+use crate::toolpath::{self, Job, ToolpathError, ToolpathSummary};
 
 /// The design files every run writes.
 pub const DESIGN_OUTPUTS: [&str; 5] = [
@@ -25,13 +25,19 @@ pub const DESIGN_OUTPUTS: [&str; 5] = [
 ];
 
 /// The part files, written when the cam surface can be followed.
-pub const PART_OUTPUTS: [&str; 4] = ["cam.step", "cam.stl", "cam.dxf", "drawing.svg"];
+pub const PART_OUTPUTS: [&str; 5] = [
+    "cam.step",
+    "cam.stl",
+    "cam.dxf",
+    "drawing.svg",
+    "drawing.pdf",
+];
 
 /// The machining files, written when the part can be milled with the cutter.
 pub const GCODE_OUTPUTS: [&str; 2] = ["cam.ngc", "toolpath.svg"];
 
 /// Every file a design run can make.
-pub const ALL_OUTPUTS: [&str; 11] = [
+pub const ALL_OUTPUTS: [&str; 12] = [
     "design.json",
     "report.html",
     "profile.csv",
@@ -41,6 +47,7 @@ pub const ALL_OUTPUTS: [&str; 11] = [
     "cam.stl",
     "cam.dxf",
     "drawing.svg",
+    "drawing.pdf",
     "cam.ngc",
     "toolpath.svg",
 ];
@@ -73,8 +80,8 @@ pub struct PartPlan {
 /// The machining program.
 #[derive(Debug, Clone)]
 pub struct Program {
-    /// The tool-centre passes.
-    pub passes: Vec<Pass>,
+    /// Each tool's drilling and tool-centre passes, in the order they run.
+    pub jobs: Vec<Job>,
     /// The G-code text of `cam.ngc`.
     pub text: String,
 }
@@ -118,9 +125,9 @@ pub fn plan(design: &Design) -> Result<Outputs, PlanError> {
     };
     let (program, gcode, gcode_refused) = match &part {
         None => (None, None, None),
-        Some(p) => match toolpath::passes(design, &p.part) {
-            Ok((passes, stats)) => {
-                let (text, blocks) = toolpath::gcode::write(design, &passes, &stats);
+        Some(p) => match toolpath::jobs(design, &p.part) {
+            Ok((jobs, stats)) => {
+                let (text, blocks) = toolpath::gcode::write(design, &jobs, &stats);
                 names.extend(GCODE_OUTPUTS);
                 let m = &spec.machining;
                 let summary = GcodeSummary {
@@ -129,7 +136,7 @@ pub fn plan(design: &Design) -> Result<Outputs, PlanError> {
                     blocks,
                     toolpath: stats,
                 };
-                (Some(Program { passes, text }), Some(summary), None)
+                (Some(Program { jobs, text }), Some(summary), None)
             }
             Err(e @ ToolpathError::Resolution { .. }) => return Err(PlanError::Toolpath(e)),
             Err(e) => (

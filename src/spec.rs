@@ -14,9 +14,10 @@ use serde::Deserialize;
 use toml::Spanned;
 
 use crate::model::{
-    ChecksSpec, Condition, Coolant, Dialect, ExpLaw, Follower, FrictionCorrection, FrictionSource,
-    Hole, LawSpec, LawTargets, MachiningSpec, Material, OutputSpec, PartSpec, Spec, SpecError,
-    SpringArrangement, TolerancesSpec, WorkOffset, MATERIALS,
+    ChecksSpec, Condition, Coolant, Dialect, DrawingSpec, ExpLaw, Follower, FrictionCorrection,
+    FrictionSource, Hole, LawSpec, LawTargets, MachiningSpec, Material, OutputSpec, PartSpec,
+    SheetSize, Spec, SpecError, SpringArrangement, TolerancesSpec, Tool, ToolKind, WorkOffset,
+    MATERIALS,
 };
 use crate::units::{parse_quantity, quoted, Dimension, UnitError};
 
@@ -133,6 +134,22 @@ struct RawSpec {
     checks: Option<RawChecks>,
     output: Option<RawOutput>,
     tolerances: Option<RawTolerances>,
+    drawing: Option<RawDrawing>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawDrawing {
+    sheet: Option<Spanned<String>>,
+    scale: Option<Spanned<String>>,
+    number: Option<Spanned<String>>,
+    revision: Option<Spanned<String>>,
+    date: Option<Spanned<String>>,
+    drawn_by: Option<Spanned<String>>,
+    general_tolerance: Option<Spanned<String>>,
+    cam_finish: Q,
+    finish: Q,
+    coordinate_step: Q,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -240,6 +257,27 @@ struct RawMachining {
     tabs: Option<Spanned<i64>>,
     tab_width: Q,
     tab_height: Q,
+    skin: Q,
+    spindle_dwell: Q,
+    ramp_angle: Q,
+    rapid: Q,
+    flute_length: Q,
+    flutes: Option<Spanned<i64>>,
+    tools: Option<Vec<RawTool>>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawTool {
+    number: Option<Spanned<i64>>,
+    kind: Option<Spanned<String>>,
+    diameter: Q,
+    flute_length: Q,
+    flutes: Option<Spanned<i64>>,
+    spindle_rpm: Q,
+    feed: Q,
+    plunge_feed: Q,
+    peck: Q,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -688,6 +726,7 @@ fn read(raw: &RawSpec, r: &mut Reader<'_>) -> Result<Spec, SpecError> {
         Some(c) => Some(read_catalogue(r, c)?),
         None => None,
     };
+    let drawing = read_drawing(raw, r)?;
     Ok(Spec {
         name,
         law,
@@ -697,6 +736,7 @@ fn read(raw: &RawSpec, r: &mut Reader<'_>) -> Result<Spec, SpecError> {
         checks,
         output,
         tolerances,
+        drawing,
         spring_catalogue,
     })
 }
@@ -1225,6 +1265,69 @@ fn read_follower(raw: &RawSpec, r: &mut Reader<'_>) -> Result<Follower, SpecErro
     })
 }
 
+fn read_drawing(raw: &RawSpec, r: &mut Reader<'_>) -> Result<DrawingSpec, SpecError> {
+    let default_raw = RawDrawing::default();
+    let g = raw.drawing.as_ref().unwrap_or(&default_raw);
+    let d = DrawingSpec::default();
+    let sheet = r.choice(
+        "drawing.sheet",
+        &g.sheet,
+        &[
+            ("a4", SheetSize::A4),
+            ("a3", SheetSize::A3),
+            ("ansi-a", SheetSize::AnsiA),
+            ("ansi-b", SheetSize::AnsiB),
+        ],
+        d.sheet,
+    )?;
+    let scale = match &g.scale {
+        None => None,
+        Some(s) if s.get_ref().trim().eq_ignore_ascii_case("auto") => None,
+        Some(s) => {
+            let text = s.get_ref().trim();
+            let parsed = text.split_once(':').and_then(|(a, b)| {
+                let (a, b) = (a.trim().parse::<f64>().ok()?, b.trim().parse::<f64>().ok()?);
+                (a > 0.0 && b > 0.0 && a.is_finite() && b.is_finite()).then_some(a / b)
+            });
+            match parsed {
+                Some(v) => Some(v),
+                None => {
+                    return Err(r.invalid(
+                        "drawing.scale",
+                        s.span().start,
+                        quoted(text),
+                        "\"auto\" or a ratio such as \"2:1\" or \"1:2\"".into(),
+                    ))
+                }
+            }
+        }
+    };
+    let text = |v: &Option<Spanned<String>>| v.as_ref().map(|s| s.get_ref().trim().to_string());
+    let um = |v: Option<f64>, default: f64| v.map_or(default, |mm| mm * 1000.0);
+    Ok(DrawingSpec {
+        sheet,
+        scale,
+        number: text(&g.number),
+        revision: text(&g.revision).unwrap_or(d.revision),
+        date: text(&g.date),
+        drawn_by: text(&g.drawn_by),
+        general_tolerance: text(&g.general_tolerance).unwrap_or(d.general_tolerance),
+        cam_finish_ra_um: um(
+            r.optional("drawing.cam_finish", &g.cam_finish, Dimension::Length)?,
+            d.cam_finish_ra_um,
+        ),
+        finish_ra_um: um(
+            r.optional("drawing.finish", &g.finish, Dimension::Length)?,
+            d.finish_ra_um,
+        ),
+        coordinate_step_mm: r.optional(
+            "drawing.coordinate_step",
+            &g.coordinate_step,
+            Dimension::Length,
+        )?,
+    })
+}
+
 fn read_machining(raw: &RawSpec, r: &mut Reader<'_>) -> Result<MachiningSpec, SpecError> {
     use Dimension as D;
     let default_raw = RawMachining::default();
@@ -1245,9 +1348,6 @@ fn read_machining(raw: &RawSpec, r: &mut Reader<'_>) -> Result<MachiningSpec, Sp
     let mut len =
         |key: &str, q: &Q, default: f64| r.or(&format!("machining.{key}"), q, D::Length, default);
     let tool_diameter_mm = len("tool_diameter", &m.tool_diameter, d.tool_diameter_mm)?;
-    // By default a pass is half the cutter deep, at most 1 mm.
-    let depth_default = d.depth_per_pass_mm.min(tool_diameter_mm / 2.0);
-    let depth_per_pass_mm = len("depth_per_pass", &m.depth_per_pass, depth_default)?;
     let stock_allowance_mm = len("stock_allowance", &m.stock_allowance, d.stock_allowance_mm)?;
     let safe_z_mm = len("safe_z", &m.safe_z, d.safe_z_mm)?;
     let stock_top_z_mm = len("stock_top_z", &m.stock_top_z, d.stock_top_z_mm)?;
@@ -1256,21 +1356,119 @@ fn read_machining(raw: &RawSpec, r: &mut Reader<'_>) -> Result<MachiningSpec, Sp
     let lead_in_radius_mm = len("lead_in_radius", &m.lead_in_radius, d.lead_in_radius_mm)?;
     let tab_width_mm = len("tab_width", &m.tab_width, d.tab_width_mm)?;
     let tab_height_mm = len("tab_height", &m.tab_height, d.tab_height_mm)?;
+    let skin_mm = len("skin", &m.skin, d.skin_mm)?;
+    let flute_length_mm = r.optional("machining.flute_length", &m.flute_length, D::Length)?;
+    let spindle_rpm = r.or(
+        "machining.spindle_rpm",
+        &m.spindle_rpm,
+        D::RotationalSpeed,
+        d.spindle_rpm,
+    )?;
+    let feed_mm_per_min = r.or("machining.feed", &m.feed, D::FeedRate, d.feed_mm_per_min)?;
+    let plunge_feed_mm_per_min = r.or(
+        "machining.plunge_feed",
+        &m.plunge_feed,
+        D::FeedRate,
+        d.plunge_feed_mm_per_min,
+    )?;
+    let flutes = m
+        .flutes
+        .as_ref()
+        .map(|_| r.count("machining.flutes", &m.flutes, u32::MAX, 0));
+    let mut tools = Vec::new();
+    if let Some(list) = &m.tools {
+        // The list replaces the single tool: its diameter and flutes belong to each tool.
+        for (key, given) in [
+            (
+                "machining.tool_diameter",
+                m.tool_diameter.as_ref().map(|v| v.span().start),
+            ),
+            (
+                "machining.flute_length",
+                m.flute_length.as_ref().map(|v| v.span().start),
+            ),
+            (
+                "machining.flutes",
+                m.flutes.as_ref().map(|v| v.span().start),
+            ),
+        ] {
+            if let Some(at) = given {
+                return Err(r.invalid(
+                    key,
+                    at,
+                    "a value next to [[machining.tools]]".into(),
+                    "the value on each tool of [[machining.tools]] instead".into(),
+                ));
+            }
+        }
+        for (i, t) in list.iter().enumerate() {
+            let key = |k: &str| format!("machining.tools[{i}].{k}");
+            let number = match &t.number {
+                Some(_) => r.count(&key("number"), &t.number, u32::MAX, 0),
+                None => i as u32 + 1,
+            };
+            tools.push(Tool {
+                number,
+                kind: r.choice(
+                    &key("kind"),
+                    &t.kind,
+                    &[("end-mill", ToolKind::EndMill), ("drill", ToolKind::Drill)],
+                    ToolKind::EndMill,
+                )?,
+                diameter_mm: r.required(&key("diameter"), &t.diameter, D::Length)?,
+                flute_length_mm: r.optional(&key("flute_length"), &t.flute_length, D::Length)?,
+                flutes: t
+                    .flutes
+                    .as_ref()
+                    .map(|_| r.count(&key("flutes"), &t.flutes, u32::MAX, 0)),
+                spindle_rpm: r.or(
+                    &key("spindle_rpm"),
+                    &t.spindle_rpm,
+                    D::RotationalSpeed,
+                    spindle_rpm,
+                )?,
+                feed_mm_per_min: r.or(&key("feed"), &t.feed, D::FeedRate, feed_mm_per_min)?,
+                plunge_feed_mm_per_min: r.or(
+                    &key("plunge_feed"),
+                    &t.plunge_feed,
+                    D::FeedRate,
+                    plunge_feed_mm_per_min,
+                )?,
+                peck_mm: r.optional(&key("peck"), &t.peck, D::Length)?,
+            });
+        }
+    }
+    // The outline is milled by the first end mill of the list; its diameter decides what
+    // concave radius can be made.
+    let outline_tool = tools.iter().find(|t| t.kind == ToolKind::EndMill);
+    let (tool_diameter_mm, spindle_rpm, feed_mm_per_min, plunge_feed_mm_per_min) =
+        match outline_tool {
+            Some(t) => (
+                t.diameter_mm,
+                t.spindle_rpm,
+                t.feed_mm_per_min,
+                t.plunge_feed_mm_per_min,
+            ),
+            None => (
+                tool_diameter_mm,
+                spindle_rpm,
+                feed_mm_per_min,
+                plunge_feed_mm_per_min,
+            ),
+        };
+    // By default a pass is half the cutter deep, at most 1 mm.
+    let depth_default = d.depth_per_pass_mm.min(tool_diameter_mm / 2.0);
+    let depth_per_pass_mm = r.or(
+        "machining.depth_per_pass",
+        &m.depth_per_pass,
+        D::Length,
+        depth_default,
+    )?;
     Ok(MachiningSpec {
         tool_diameter_mm,
-        spindle_rpm: r.or(
-            "machining.spindle_rpm",
-            &m.spindle_rpm,
-            D::RotationalSpeed,
-            d.spindle_rpm,
-        )?,
-        feed_mm_per_min: r.or("machining.feed", &m.feed, D::FeedRate, d.feed_mm_per_min)?,
-        plunge_feed_mm_per_min: r.or(
-            "machining.plunge_feed",
-            &m.plunge_feed,
-            D::FeedRate,
-            d.plunge_feed_mm_per_min,
-        )?,
+        spindle_rpm,
+        feed_mm_per_min,
+        plunge_feed_mm_per_min,
         depth_per_pass_mm,
         stock_allowance_mm,
         safe_z_mm,
@@ -1300,6 +1498,23 @@ fn read_machining(raw: &RawSpec, r: &mut Reader<'_>) -> Result<MachiningSpec, Sp
         tabs: r.count("machining.tabs", &m.tabs, usize::MAX, d.tabs),
         tab_width_mm,
         tab_height_mm,
+        skin_mm,
+        spindle_dwell_s: r.or(
+            "machining.spindle_dwell",
+            &m.spindle_dwell,
+            D::Time,
+            d.spindle_dwell_s,
+        )?,
+        ramp_angle_deg: r.or(
+            "machining.ramp_angle",
+            &m.ramp_angle,
+            D::Angle,
+            d.ramp_angle_deg,
+        )?,
+        rapid_mm_per_min: r.or("machining.rapid", &m.rapid, D::FeedRate, d.rapid_mm_per_min)?,
+        flute_length_mm,
+        flutes,
+        tools,
     })
 }
 

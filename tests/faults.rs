@@ -12,7 +12,7 @@ use rand::{Rng, SeedableRng};
 mod common;
 use common::camspring;
 
-const ALL_OUTPUTS: [&str; 11] = [
+const ALL_OUTPUTS: [&str; 12] = [
     "design.json",
     "report.html",
     "profile.csv",
@@ -22,6 +22,7 @@ const ALL_OUTPUTS: [&str; 11] = [
     "cam.stl",
     "cam.dxf",
     "drawing.svg",
+    "drawing.pdf",
     "cam.ngc",
     "toolpath.svg",
 ];
@@ -331,7 +332,10 @@ fn former_panics_are_clear_errors_or_designs() {
     let small = file(
         d.path(),
         "small.toml",
-        &paper_with("tool_diameter = \"6 mm\"", "tool_diameter = \"0.5 mm\""),
+        &paper_with(
+            "tool_diameter = \"6 mm\"",
+            "tool_diameter = \"0.5 mm\"\nflute_length = \"12 mm\"",
+        ),
     );
     let out = camspring(d.path(), &["design", &small, "-o", "s"]);
     assert_eq!(out.status.code(), Some(0));

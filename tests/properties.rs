@@ -179,14 +179,15 @@ proptest! {
                             prop_assert!(e.fit_deviation_mm <= spec.output.fit_tolerance_mm);
                         }
                         // Machining: a program, or a refusal that names what to change.
-                        match camspring::toolpath::passes(&d, &part) {
-                            Ok((passes, summary)) => {
+                        match camspring::toolpath::jobs(&d, &part) {
+                            Ok((jobs, summary)) => {
                                 prop_assert!(summary.max_fit_deviation_mm <= summary.fit_budget_mm);
-                                let (text, _) = camspring::toolpath::gcode::write(&d, &passes, &summary);
+                                let (text, _) = camspring::toolpath::gcode::write(&d, &jobs, &summary);
                                 prop_assert!(text.ends_with("M2\n"));
                             }
                             Err(e) => prop_assert!(e.to_string().contains("machining.tool_diameter")
-                                || e.to_string().contains("drill it"), "{e}"),
+                                || e.to_string().contains("add a drill")
+                                || e.to_string().contains("flute length"), "{e}"),
                         }
                     }
                     Err(PartError::Undercut { advice, .. }) => {

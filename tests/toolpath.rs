@@ -4,7 +4,7 @@
 use camspring::design::design;
 use camspring::part::build;
 use camspring::toolpath::path::{sample_move, Move};
-use camspring::toolpath::{contour, gcode, passes, ToolpathError};
+use camspring::toolpath::{contour, gcode, jobs, Pass, ToolpathError};
 use camspring::{
     model::{Hole, Spec},
     spec::DEFAULT_SPEC_TOML,
@@ -70,6 +70,15 @@ fn finishing_contour_is_the_exact_offset_within_tolerance() {
     }
 }
 
+/// Every milled pass of a program, in order.
+fn passes(
+    d: &camspring::design::Design,
+    part: &camspring::part::Part,
+) -> Result<(Vec<Pass>, camspring::toolpath::ToolpathSummary), ToolpathError> {
+    let (js, summary) = jobs(d, part)?;
+    Ok((js.into_iter().flat_map(|j| j.passes).collect(), summary))
+}
+
 fn gcode_rounding(spec: &Spec) -> f64 {
     camspring::toolpath::rounding_mm(gcode::decimals(spec.machining.dialect))
 }
@@ -81,9 +90,11 @@ fn roughing_leaves_the_allowance_and_steps_down_evenly() {
     let part = build(&d).unwrap();
     let (ps, summary) = passes(&d, &part).unwrap();
     let total = spec.part.thickness_mm + spec.machining.breakthrough_mm;
+    // Roughing stops at the skin above the bottom face.
+    let rough = spec.part.thickness_mm - spec.machining.skin_mm;
     assert_eq!(
         summary.rough_levels,
-        (total / spec.machining.depth_per_pass_mm).ceil() as usize
+        (rough / spec.machining.depth_per_pass_mm).ceil() as usize
     );
     assert!(summary.depth_step_mm <= spec.machining.depth_per_pass_mm);
     let poly = boundary(&spec);
@@ -92,7 +103,7 @@ fn roughing_leaves_the_allowance_and_steps_down_evenly() {
         // No move anywhere comes closer than the radius (less the tolerance): no gouge.
         let mut from = p.entry;
         let mut closest = f64::INFINITY;
-        for m in &p.moves {
+        for m in p.steps.iter().map(|s| &s.mv) {
             for q in sample_move(from, m, 12) {
                 closest = closest.min(dist_to_polygon(q, &poly));
             }
@@ -179,13 +190,70 @@ fn spec_refuses_unsafe_machining_settings() {
     }
 }
 
+/// The program of a spec: its text and summary.
+fn program(spec: &Spec) -> (String, usize, camspring::toolpath::ToolpathSummary) {
+    let d = design(spec).unwrap();
+    let part = build(&d).unwrap();
+    let (js, summary) = jobs(&d, &part).unwrap();
+    let (text, blocks) = gcode::write(&d, &js, &summary);
+    (text, blocks, summary)
+}
+
+/// The axis words of a code line, e.g. "G0 X1. Z5." -> ['X', 'Z'].
+fn axes(line: &str) -> Vec<char> {
+    line.split_whitespace()
+        .filter_map(|w| w.chars().next())
+        .filter(|c| matches!(c, 'X' | 'Y' | 'Z'))
+        .collect()
+}
+
+/// A spec with three holes and three tools: a 6 mm end mill (outline and the 8 mm hole), a
+/// 3 mm end mill (the 5 mm hole, by helix) and a 3.3 mm drill (the 3.3 mm hole).
+fn three_tools(dialect: camspring::model::Dialect) -> Spec {
+    use camspring::model::{Tool, ToolKind};
+    let mut spec = paper();
+    spec.part.holes = vec![
+        Hole {
+            x_mm: 12.0,
+            y_mm: 0.0,
+            diameter_mm: 8.0,
+        },
+        Hole {
+            x_mm: 3.0,
+            y_mm: 0.0,
+            diameter_mm: 5.0,
+        },
+        Hole {
+            x_mm: 18.0,
+            y_mm: -5.5,
+            diameter_mm: 3.3,
+        },
+    ];
+    let tool = |number, kind, diameter_mm, flute_length_mm| Tool {
+        number,
+        kind,
+        diameter_mm,
+        flute_length_mm,
+        flutes: Some(2),
+        spindle_rpm: 12000.0,
+        feed_mm_per_min: 600.0,
+        plunge_feed_mm_per_min: 120.0,
+        peck_mm: None,
+    };
+    spec.machining.tools = vec![
+        tool(1, ToolKind::EndMill, 6.0, Some(16.0)),
+        tool(2, ToolKind::EndMill, 3.0, Some(12.0)),
+        tool(3, ToolKind::Drill, 3.3, None),
+    ];
+    spec.machining.dialect = dialect;
+    spec.machining.tolerance_mm = dialect.default_tolerance_mm();
+    spec
+}
+
 #[test]
 fn program_text_follows_the_rules() {
     let spec = paper();
-    let d = design(&spec).unwrap();
-    let part = build(&d).unwrap();
-    let (ps, summary) = passes(&d, &part).unwrap();
-    let (text, blocks) = gcode::write(&d, &ps, &summary);
+    let (text, blocks, _) = program(&spec);
     let code: Vec<&str> = text.lines().filter(|l| !l.starts_with('(')).collect();
     assert_eq!(code.len(), blocks);
     assert!(
@@ -215,6 +283,192 @@ fn program_text_follows_the_rules() {
 }
 
 #[test]
+fn every_tool_starts_with_z_alone_and_a_spindle_dwell() {
+    use camspring::model::Dialect;
+    for dialect in [Dialect::Linuxcnc, Dialect::Grbl, Dialect::Fanuc] {
+        for spec in [
+            {
+                let mut s = paper();
+                s.machining.dialect = dialect;
+                s.machining.tolerance_mm = dialect.default_tolerance_mm();
+                s
+            },
+            three_tools(dialect),
+        ] {
+            let (text, _, summary) = program(&spec);
+            let code: Vec<&str> = text.lines().filter(|l| !l.starts_with('(')).collect();
+            // Where each tool starts: its change (M6), or for GRBL the pause (M0) and the
+            // program start.
+            let mut starts: Vec<usize> = code
+                .iter()
+                .enumerate()
+                .filter(|(_, l)| l.contains("M6") || **l == "M0")
+                .map(|(i, _)| i)
+                .collect();
+            if dialect == Dialect::Grbl {
+                assert!(!text.contains("M6"), "GRBL has no tool change");
+                starts.insert(0, 0);
+            }
+            assert_eq!(starts.len(), summary.tools.len(), "{dialect:?}");
+            for &i in &starts {
+                let motion = code[i + 1..].iter().find(|l| !axes(l).is_empty()).unwrap();
+                assert_eq!(axes(motion), vec!['Z'], "{dialect:?}: {motion}");
+                let z: f64 = motion.split('Z').nth(1).unwrap().parse().unwrap();
+                assert_eq!(z, spec.machining.safe_z_mm);
+            }
+            let dwell = match dialect {
+                Dialect::Fanuc => "G4 P3000",
+                _ => "G4 P3.",
+            };
+            let mut m3 = 0;
+            for (i, l) in code.iter().enumerate() {
+                if l.split_whitespace().any(|w| w == "M3") {
+                    m3 += 1;
+                    assert_eq!(code[i + 1], dwell, "{dialect:?}");
+                }
+            }
+            assert_eq!(m3, summary.tools.len());
+        }
+    }
+}
+
+#[test]
+fn tools_are_chosen_per_hole_and_ordered_drills_first() {
+    use camspring::model::{Dialect, ToolKind};
+    let spec = three_tools(Dialect::Linuxcnc);
+    let d = design(&spec).unwrap();
+    let (js, summary) = jobs(&d, &build(&d).unwrap()).unwrap();
+    let order: Vec<u32> = js.iter().map(|j| j.tool.number).collect();
+    assert_eq!(order, vec![3, 2, 1]);
+    assert_eq!(js[0].tool.kind, ToolKind::Drill);
+    let drill = js[0].drilling.as_ref().unwrap();
+    assert_eq!(drill.holes.len(), 1);
+    assert_eq!(drill.holes[0].0, 2);
+    // Through the plate and the breakthrough with the full diameter: the 118 degree point
+    // adds d / (2 tan 59 deg).
+    let point = 3.3 / (2.0 * 59f64.to_radians().tan());
+    assert!(
+        (drill.z_mm - (-10.5 - point)).abs() < 1e-3,
+        "{}",
+        drill.z_mm
+    );
+    // 11.5 mm is deeper than three diameters: pecks of one diameter.
+    assert_eq!(drill.peck_mm, Some(3.3));
+    assert!(js[1].passes.iter().all(|p| p.label.starts_with("hole 1")));
+    assert!(js[2].passes.iter().any(|p| p.label.starts_with("hole 0")));
+    assert!(js[2]
+        .passes
+        .last()
+        .unwrap()
+        .label
+        .starts_with("outline finish"));
+    assert_eq!(summary.tools.len(), 3);
+    let (text, _, _) = program(&spec);
+    assert!(text.contains("G98 G83 X18. Y-5.5"), "{text}");
+    assert!(text.contains("T2 M6") && text.contains("T3 M6"));
+}
+
+#[test]
+fn a_tool_too_short_for_the_depth_is_refused_naming_both() {
+    let mut spec = paper();
+    spec.machining.tool_diameter_mm = 3.0;
+    spec.machining.depth_per_pass_mm = 1.0;
+    let d = design(&spec).unwrap();
+    let e = jobs(&d, &build(&d).unwrap()).unwrap_err();
+    assert!(
+        matches!(e, ToolpathError::FluteLength { assumed: true, .. }),
+        "{e:?}"
+    );
+    let text = e.to_string();
+    // 10 mm plate + 0.5 mm breakthrough against the assumed 3 diameters.
+    assert!(
+        text.contains("10.500 mm deep") && text.contains("9.000 mm"),
+        "{text}"
+    );
+    assert!(text.contains("flute_length"), "{text}");
+    spec.machining.flute_length_mm = Some(12.0);
+    let d = design(&spec).unwrap();
+    assert!(jobs(&d, &build(&d).unwrap()).is_ok());
+    spec.machining.flute_length_mm = Some(8.0);
+    let d = design(&spec).unwrap();
+    let text = jobs(&d, &build(&d).unwrap()).unwrap_err().to_string();
+    assert!(
+        text.contains("8.000 mm") && !text.contains("assumed"),
+        "{text}"
+    );
+}
+
+#[test]
+fn feeds_far_from_practice_are_warned_in_the_program() {
+    // "800 mm/s" is a valid feed rate, 48000 mm/min: written as asked, and warned.
+    let base = include_str!("../specs/paper.toml");
+    let spec = Spec::from_toml(&base.replace(
+        "tool_diameter = \"6 mm\"",
+        "tool_diameter = \"6 mm\"\nfeed = \"800 mm/s\"\nflutes = 2",
+    ))
+    .unwrap();
+    assert_eq!(spec.machining.feed_mm_per_min, 48000.0);
+    let (text, _, summary) = program(&spec);
+    assert!(
+        summary
+            .warnings
+            .iter()
+            .any(|w| w.contains("machining.feed = 48000")),
+        "{:?}",
+        summary.warnings
+    );
+    // 48000 / (8000 rpm x 2) = 3 mm per tooth, beyond 6 / 40.
+    assert!(summary
+        .warnings
+        .iter()
+        .any(|w| w.contains("chip load 3.0000")));
+    assert!(text.contains("(WARNING: machining.feed = 48000"));
+    // The default settings are within practice.
+    assert!(program(&paper()).2.warnings.is_empty());
+}
+
+#[test]
+fn entries_ramp_within_the_angle_and_roughing_never_cuts_through() {
+    use camspring::model::Dialect;
+    let spec = three_tools(Dialect::Linuxcnc);
+    let d = design(&spec).unwrap();
+    let part = build(&d).unwrap();
+    let (js, _) = jobs(&d, &part).unwrap();
+    let m = &spec.machining;
+    let bottom = m.stock_top_z_mm - spec.part.thickness_mm;
+    let tan = m.ramp_angle_deg.to_radians().tan();
+    let mut finished = false;
+    for p in js.iter().flat_map(|j| &j.passes) {
+        assert!(!finished, "{} after the outline's finishing pass", p.label);
+        let mut from = p.entry;
+        let mut z = p.entry_z_mm;
+        for s in &p.steps {
+            let planar: f64 = sample_move(from, &s.mv, 64)
+                .windows(2)
+                .map(|w| (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]))
+                .sum();
+            let drop = z - s.z_mm;
+            if drop > 1e-9 && !s.plunge {
+                assert!(
+                    drop <= tan * planar * (1.0 + 1e-6),
+                    "{}: {drop} over {planar}",
+                    p.label
+                );
+            }
+            from = s.mv.to();
+            z = s.z_mm;
+        }
+        // Before the outline's finishing pass nothing reaches the bottom face outside a hole.
+        if !p.label.starts_with("outline finish") && !p.label.contains("finish") {
+            let lowest = p.steps.iter().map(|s| s.z_mm).fold(f64::INFINITY, f64::min);
+            assert!(lowest >= bottom + m.skin_mm - 1e-9, "{}: {lowest}", p.label);
+        }
+        finished = p.label.starts_with("outline finish");
+    }
+    assert!(finished);
+}
+
+#[test]
 fn tabs_lift_over_the_straight_edges_or_are_refused() {
     let mut spec = paper();
     spec.machining.tabs = 2;
@@ -226,13 +480,17 @@ fn tabs_lift_over_the_straight_edges_or_are_refused() {
         spec.machining.stock_top_z_mm - spec.part.thickness_mm + spec.machining.tab_height_mm;
     for p in ps.iter().filter(|p| p.label.starts_with("outline")) {
         let lifts: Vec<f64> = p
-            .moves
+            .steps
             .iter()
             .enumerate()
-            .filter(|(k, _)| p.over_tab[*k])
-            .map(|(k, m)| {
-                let from = if k == 0 { p.entry } else { p.moves[k - 1].to() };
-                let to = m.to();
+            .filter(|(k, s)| p.over_tab[*k] && !s.plunge)
+            .map(|(k, s)| {
+                let from = if k == 0 {
+                    p.entry
+                } else {
+                    p.steps[k - 1].mv.to()
+                };
+                let to = s.mv.to();
                 (to[0] - from[0]).hypot(to[1] - from[1])
             })
             .collect();

@@ -256,9 +256,11 @@ fn render_file(design: &Design, outputs: &Outputs, name: &str) -> Result<Vec<u8>
             dxf::dxf_bytes(&part()?.part, &outputs.summary.run_id).map_err(encode("cam.dxf"))?
         }
         "drawing.svg" => drawing::drawing_svg(design, &part()?.part).into_bytes(),
+        "drawing.pdf" => drawing::drawing_pdf(&drawing::drawing_svg(design, &part()?.part))
+            .map_err(|e| encode("drawing.pdf")(e.to_string()))?,
         "cam.ngc" => program()?.text.clone().into_bytes(),
         "toolpath.svg" => {
-            render::design::toolpath_svg(design, &part()?.part, &program()?.passes).into_bytes()
+            render::design::toolpath_svg(design, &part()?.part, &program()?.jobs).into_bytes()
         }
         other => return Err(encode("an output")(format!("no writer for \"{other}\""))),
     })

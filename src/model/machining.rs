@@ -26,6 +26,59 @@ pub enum Coolant {
     Off,
 }
 
+/// What a tool does to the part.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ToolKind {
+    /// A flat end mill: the outline, and holes by helical interpolation.
+    EndMill,
+    /// A twist drill (118 degree point): holes of its own diameter, by G81 or G83.
+    Drill,
+}
+
+/// One tool of the program's list (`[[machining.tools]]`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Tool {
+    /// Tool number (T word, H offset).
+    pub number: u32,
+    /// End mill or drill.
+    pub kind: ToolKind,
+    /// Diameter.
+    pub diameter_mm: f64,
+    /// Length of the cutting flutes; when not given, 3 diameters (a standard-length end mill)
+    /// or 8 diameters (a jobber drill) is assumed for the depth check.
+    pub flute_length_mm: Option<f64>,
+    /// Number of flutes (for the chip load).
+    pub flutes: Option<u32>,
+    /// Spindle speed.
+    pub spindle_rpm: f64,
+    /// Cutting feed.
+    pub feed_mm_per_min: f64,
+    /// Plunge (and drilling) feed.
+    pub plunge_feed_mm_per_min: f64,
+    /// Peck depth for deep drilling (G83); default one diameter.
+    pub peck_mm: Option<f64>,
+}
+
+impl Tool {
+    /// The flute length the depth check uses: the given one, or the assumed standard.
+    pub fn usable_length_mm(&self) -> f64 {
+        self.flute_length_mm.unwrap_or(match self.kind {
+            ToolKind::EndMill => 3.0 * self.diameter_mm,
+            ToolKind::Drill => 8.0 * self.diameter_mm,
+        })
+    }
+
+    /// "6 mm end mill", "3.3 mm drill".
+    pub fn describe(&self) -> String {
+        let kind = match self.kind {
+            ToolKind::EndMill => "end mill",
+            ToolKind::Drill => "drill",
+        };
+        format!("{} mm {kind}", self.diameter_mm)
+    }
+}
+
 /// Machining settings: the cutter (which also decides what concave radius can be made) and
 /// how the G-code mills the part.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -68,6 +121,41 @@ pub struct MachiningSpec {
     pub tab_width_mm: f64,
     /// Height of each tab above the part's bottom face.
     pub tab_height_mm: f64,
+    /// The skin roughing leaves: it stops this far above the part's bottom face, so that only
+    /// the finishing pass cuts the part (and the slugs of milled holes) free.
+    pub skin_mm: f64,
+    /// Dwell after every spindle start, for the spindle to reach speed.
+    pub spindle_dwell_s: f64,
+    /// Largest angle of a ramped or helical entry to the horizontal.
+    pub ramp_angle_deg: f64,
+    /// Rapid traverse rate, for the cycle-time estimate.
+    pub rapid_mm_per_min: f64,
+    /// Flute length of the single tool (when `tools` is empty).
+    pub flute_length_mm: Option<f64>,
+    /// Flutes of the single tool (when `tools` is empty).
+    pub flutes: Option<u32>,
+    /// The tool list; empty: one end mill of `tool_diameter_mm` at the feeds above.
+    pub tools: Vec<Tool>,
+}
+
+impl MachiningSpec {
+    /// The tools the program may use: the list, or the one end mill the settings describe.
+    pub fn tool_list(&self) -> Vec<Tool> {
+        if !self.tools.is_empty() {
+            return self.tools.clone();
+        }
+        vec![Tool {
+            number: 1,
+            kind: ToolKind::EndMill,
+            diameter_mm: self.tool_diameter_mm,
+            flute_length_mm: self.flute_length_mm,
+            flutes: self.flutes,
+            spindle_rpm: self.spindle_rpm,
+            feed_mm_per_min: self.feed_mm_per_min,
+            plunge_feed_mm_per_min: self.plunge_feed_mm_per_min,
+            peck_mm: None,
+        }]
+    }
 }
 
 /// The work coordinate system the program runs in.
@@ -152,6 +240,13 @@ impl Default for MachiningSpec {
             tabs: 0,
             tab_width_mm: 3.0,
             tab_height_mm: 1.0,
+            skin_mm: 0.5,
+            spindle_dwell_s: 3.0,
+            ramp_angle_deg: 3.0,
+            rapid_mm_per_min: 3000.0,
+            flute_length_mm: None,
+            flutes: None,
+            tools: Vec::new(),
         }
     }
 }

@@ -22,6 +22,7 @@
 //! assert!(err.to_string().contains("follower.spring_rate"));
 //! ```
 
+pub mod drawing;
 pub mod follower;
 pub mod law;
 pub mod machining;
@@ -29,12 +30,13 @@ pub mod part;
 
 use serde::Serialize;
 
+pub use drawing::{DrawingSpec, SheetSize};
 pub use follower::{
     CatalogueSpring, Follower, FrictionCorrection, FrictionSource, RollerBearing,
     SpringArrangement, SpringCatalogue, MAX_FRICTION,
 };
 pub use law::{Condition, ExpLaw, ForceLaw, LawSpec, LawTargets, PolyLaw, TableLaw};
-pub use machining::{Coolant, Dialect, MachiningSpec, WorkOffset};
+pub use machining::{Coolant, Dialect, MachiningSpec, Tool, ToolKind, WorkOffset};
 pub use part::{Hole, Material, PartSpec, MATERIALS};
 
 /// Line contact between cylinders first yields below the surface when the peak Hertz pressure
@@ -247,6 +249,8 @@ pub struct Spec {
     pub output: OutputSpec,
     /// Tolerances of the build, for the force band.
     pub tolerances: TolerancesSpec,
+    /// The shop drawing's sheet, scale, title block and notes.
+    pub drawing: DrawingSpec,
     /// Springs to choose from (`follower.spring_catalogue`), for `camspring springs`.
     pub spring_catalogue: Option<SpringCatalogue>,
 }
@@ -410,6 +414,7 @@ impl Spec {
                 checks: ChecksSpec::default(),
                 output: OutputSpec::default(),
                 tolerances: TolerancesSpec::default(),
+                drawing: DrawingSpec::default(),
                 spring_catalogue: None,
             },
             checks_given: false,
@@ -450,7 +455,8 @@ impl Spec {
         validate_machining(&self.machining, &self.part)?;
         validate_checks(&self.checks)?;
         validate_output(&self.output)?;
-        validate_tolerances(&self.tolerances)
+        validate_tolerances(&self.tolerances)?;
+        validate_drawing(&self.drawing)
     }
 }
 
@@ -916,6 +922,168 @@ fn validate_machining(m: &MachiningSpec, part: &PartSpec) -> Result<(), SpecErro
             found_value(m.tab_height_mm, "mm"),
             format!("less than part.thickness = {} mm", part.thickness_mm),
         ));
+    }
+    check(
+        "machining.skin",
+        m.skin_mm,
+        Range::HalfOpen(0.0, part.thickness_mm),
+        "mm",
+    )?;
+    check(
+        "machining.spindle_dwell",
+        m.spindle_dwell_s,
+        Range::Closed(0.0, 600.0),
+        "s",
+    )?;
+    check(
+        "machining.ramp_angle",
+        m.ramp_angle_deg,
+        Range::Closed(0.5, 45.0),
+        "deg",
+    )?;
+    check(
+        "machining.rapid",
+        m.rapid_mm_per_min,
+        Range::Positive,
+        "mm/min",
+    )?;
+    if let Some(l) = m.flute_length_mm {
+        check(
+            "machining.flute_length",
+            l,
+            Range::Open(0.0, MAX_LENGTH_MM),
+            "mm",
+        )?;
+    }
+    if let Some(n) = m.flutes {
+        check_flutes("machining.flutes", n)?;
+    }
+    let mut numbers = std::collections::BTreeSet::new();
+    for (i, t) in m.tools.iter().enumerate() {
+        let key = |k: &str| format!("machining.tools[{i}].{k}");
+        if !(1..=MAX_TOOL_NUMBER).contains(&t.number) {
+            return Err(invalid(
+                &key("number"),
+                t.number.to_string(),
+                format!("a tool number from 1 to {MAX_TOOL_NUMBER}"),
+            ));
+        }
+        if !numbers.insert(t.number) {
+            return Err(invalid(
+                &key("number"),
+                t.number.to_string(),
+                "a number no other tool of the list has".into(),
+            ));
+        }
+        check(
+            &key("diameter"),
+            t.diameter_mm,
+            Range::Closed(0.01, MAX_TOOL_DIAMETER_MM),
+            "mm",
+        )?;
+        if let Some(l) = t.flute_length_mm {
+            check(
+                &key("flute_length"),
+                l,
+                Range::Open(0.0, MAX_LENGTH_MM),
+                "mm",
+            )?;
+        }
+        if let Some(n) = t.flutes {
+            check_flutes(&key("flutes"), n)?;
+        }
+        check(
+            &key("spindle_rpm"),
+            t.spindle_rpm,
+            Range::Open(0.0, 200_000.0),
+            "rpm",
+        )?;
+        check(&key("feed"), t.feed_mm_per_min, Range::Positive, "mm/min")?;
+        check(
+            &key("plunge_feed"),
+            t.plunge_feed_mm_per_min,
+            Range::Positive,
+            "mm/min",
+        )?;
+        if let Some(q) = t.peck_mm {
+            check(&key("peck"), q, Range::Open(0.0, MAX_LENGTH_MM), "mm")?;
+        }
+    }
+    if !m.tools.is_empty() && !m.tools.iter().any(|t| t.kind == ToolKind::EndMill) {
+        return Err(invalid(
+            "machining.tools",
+            format!("{} drills and no end mill", m.tools.len()),
+            "at least one end mill (kind = \"end-mill\"): the first mills the outline".into(),
+        ));
+    }
+    Ok(())
+}
+
+/// Largest tool number (T word) accepted.
+pub const MAX_TOOL_NUMBER: u32 = 99;
+
+fn check_flutes(key: &str, n: u32) -> Result<(), SpecError> {
+    if !(1..=12).contains(&n) {
+        return Err(invalid(key, n.to_string(), "from 1 to 12 flutes".into()));
+    }
+    Ok(())
+}
+
+/// Longest text accepted in a title-block field.
+pub const MAX_TITLE_FIELD_CHARS: usize = 40;
+
+fn validate_drawing(d: &DrawingSpec) -> Result<(), SpecError> {
+    if let Some(s) = d.scale {
+        if !drawing::STANDARD_SCALES
+            .iter()
+            .any(|v| (v - s).abs() < 1e-9)
+        {
+            return Err(invalid(
+                "drawing.scale",
+                drawing::scale_label(s),
+                "a standard scale: 10:1, 5:1, 2:1, 1:1, 1:2, 1:5, 1:10, 1:20 or 1:50".into(),
+            ));
+        }
+    }
+    for (key, text) in [
+        ("drawing.number", d.number.as_deref()),
+        ("drawing.revision", Some(d.revision.as_str())),
+        ("drawing.date", d.date.as_deref()),
+        ("drawing.drawn_by", d.drawn_by.as_deref()),
+        (
+            "drawing.general_tolerance",
+            Some(d.general_tolerance.as_str()),
+        ),
+    ] {
+        if let Some(t) = text {
+            if t.chars().count() > MAX_TITLE_FIELD_CHARS || t.chars().any(char::is_control) {
+                return Err(invalid(
+                    key,
+                    crate::units::quoted(t),
+                    format!("a line of at most {MAX_TITLE_FIELD_CHARS} characters"),
+                ));
+            }
+        }
+    }
+    check(
+        "drawing.cam_finish",
+        d.cam_finish_ra_um,
+        Range::Closed(0.025, 50.0),
+        "um",
+    )?;
+    check(
+        "drawing.finish",
+        d.finish_ra_um,
+        Range::Closed(0.025, 50.0),
+        "um",
+    )?;
+    if let Some(s) = d.coordinate_step_mm {
+        check(
+            "drawing.coordinate_step",
+            s,
+            Range::Closed(0.01, 100.0),
+            "mm",
+        )?;
     }
     Ok(())
 }

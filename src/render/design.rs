@@ -10,7 +10,7 @@ use crate::cam::tolerance::ForceBand;
 use crate::design::Design;
 use crate::outputs::DesignSummary;
 use crate::part::Part;
-use crate::toolpath::{self, Pass};
+use crate::toolpath::{self, Job, Pass};
 
 /// The human-readable report of a design run.
 pub fn format_design(s: &DesignSummary, written: &[PathBuf]) -> String {
@@ -154,6 +154,32 @@ pub fn format_design(s: &DesignSummary, written: &[PathBuf]) -> String {
                 g.toolpath.fit_budget_mm,
                 g.toolpath.estimated_minutes
             );
+            for t in &g.toolpath.tools {
+                let _ = writeln!(
+                    o,
+                    "           T{} {} mm {:?}, {:.3} mm deep (flutes {:.3} mm{}): {}",
+                    t.number,
+                    t.diameter_mm,
+                    t.kind,
+                    t.depth_mm,
+                    t.flute_length_mm,
+                    if t.flute_length_assumed {
+                        ", assumed"
+                    } else {
+                        ""
+                    },
+                    t.purpose
+                );
+            }
+            let st = &g.toolpath.stock;
+            let _ = writeln!(
+                o,
+                "           stock at least {:.1} x {:.1} x {:.2} mm, corner at ({:.2}, {:.2}) mm",
+                st.size_mm[0], st.size_mm[1], st.size_mm[2], st.corner_mm[0], st.corner_mm[1]
+            );
+            for w in &g.toolpath.warnings {
+                let _ = writeln!(o, "  WARNING  {w}");
+            }
         }
         (None, Some(why)) => {
             let _ = writeln!(o, "  gcode    REFUSED: {why}");
@@ -387,7 +413,8 @@ pub fn profile_svg(design: &Design) -> String {
 }
 
 /// `toolpath.svg`: the part outline with the finishing and last roughing passes, to scale.
-pub fn toolpath_svg(design: &Design, part: &Part, passes: &[Pass]) -> String {
+pub fn toolpath_svg(design: &Design, part: &Part, jobs: &[Job]) -> String {
+    let passes: Vec<&Pass> = jobs.iter().flat_map(|j| &j.passes).collect();
     let mut outline: Vec<(f64, f64)> = part
         .outline_polygon()
         .iter()
@@ -415,7 +442,7 @@ pub fn toolpath_svg(design: &Design, part: &Part, passes: &[Pass]) -> String {
     {
         let mut pts = vec![(p.entry[0], p.entry[1])];
         let mut from = p.entry;
-        for mv in &p.moves {
+        for mv in p.steps.iter().map(|s| &s.mv) {
             pts.extend(
                 toolpath::path::sample_move(from, mv, 12)
                     .into_iter()

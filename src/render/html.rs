@@ -357,6 +357,18 @@ pub fn report_html(
         (None, None) => h.push_str("<p>No part.</p>\n"),
     }
     if let Some(g) = &summary.gcode {
+        for w in &g.toolpath.warnings {
+            let _ = writeln!(h, "<p class=\"warn\">G-code warning: {}</p>", escape(w));
+        }
+        let _ = writeln!(
+            h,
+            "<p>Estimated cycle time {:.1} min (tool changes not counted), {} tools, stock at least {:.1} x {:.1} x {:.2} mm.</p>",
+            g.toolpath.estimated_minutes,
+            g.toolpath.tools.len(),
+            g.toolpath.stock.size_mm[0],
+            g.toolpath.stock.size_mm[1],
+            g.toolpath.stock.size_mm[2]
+        );
         let value = serde_json::to_value(g).unwrap_or(Value::Null);
         h.push_str("<p>G-code program:</p>");
         h.push_str(&json_table(&value));

@@ -1,18 +1,21 @@
 //! G-code emission: a modal machine state that writes words only when they change, and the
 //! dialect rules (LinuxCNC, GRBL, Fanuc).
 //!
-//! Every program: a header of comments (spec, law, tool, tolerance), units G21, absolute G90,
-//! plane G17, feed per minute G94, the work offset, the tool, spindle on before the first cut,
-//! coolant; rapids only at or above the stock top (to `safe_z`, then down to 1 mm above the
-//! stock); plunges at the plunge feed; cutting moves at the cutting feed; at the end spindle and
-//! coolant off and M2 (LinuxCNC, GRBL) or M30 (Fanuc).
+//! Every program: a header of comments (spec, law, stock and origin, tool list, estimated
+//! cycle time, tolerance, warnings), then units G21, absolute G90, plane G17, feed per minute
+//! G94, no compensation or canned cycle (G40 G49 G80), the work offset. Each tool: the tool
+//! change (`M6` and `G43`; GRBL, which has none, pauses with `M0`), a rapid of Z alone to the
+//! safe height, spindle on with a dwell, coolant. Rapids only at or above the stock top (to
+//! `safe_z`, then down to 1 mm above the stock), except a peck's return inside its own drilled
+//! hole; descents in air at the plunge feed; ramps, helices and cutting moves at the cutting
+//! feed; at the end spindle and coolant off and M2 (LinuxCNC, GRBL) or M30 (Fanuc).
 
 use std::fmt::Write as _;
 
 use super::path::Move;
-use super::{Pass, ToolpathSummary};
+use super::{Drilling, Job, ToolUse, ToolpathSummary};
 use crate::design::Design;
-use crate::model::{Coolant, Dialect};
+use crate::model::{Coolant, Dialect, MachiningSpec, Tool, ToolKind};
 
 /// Decimals written for coordinates in a dialect.
 pub fn decimals(d: Dialect) -> usize {
@@ -89,12 +92,25 @@ impl Writer {
         if self.dialect == Dialect::Fanuc {
             t = t.to_uppercase();
         }
-        if self.dialect == Dialect::Grbl && t.len() + 2 > GRBL_MAX_LINE {
-            t.truncate(GRBL_MAX_LINE - 2);
+        // GRBL's line buffer is short: a long comment goes on several lines, split at spaces.
+        let width = if self.dialect == Dialect::Grbl {
+            GRBL_MAX_LINE - 2
+        } else {
+            usize::MAX
+        };
+        let mut line = String::new();
+        for word in t.split(' ') {
+            let word: String = word.chars().take(width).collect();
+            if !line.is_empty() && line.len() + 1 + word.len() > width {
+                self.out.push_str(&format!("({line})\n"));
+                line.clear();
+            }
+            if !line.is_empty() {
+                line.push(' ');
+            }
+            line.push_str(&word);
         }
-        let line = format!("({t})");
-        self.out.push_str(&line);
-        self.out.push('\n');
+        self.out.push_str(&format!("({line})\n"));
     }
 
     fn words(
@@ -155,8 +171,87 @@ impl Writer {
     }
 }
 
+/// A number for a comment: as [`num`], without a trailing decimal point ("6", "10.5").
+fn txt(v: f64, decimals: usize) -> String {
+    num(v, decimals).trim_end_matches('.').to_string()
+}
+
+/// A dwell of `seconds` in the dialect: P in seconds (LinuxCNC, GRBL) or milliseconds (Fanuc).
+fn dwell(d: Dialect, seconds: f64) -> String {
+    match d {
+        Dialect::Fanuc => format!("G4 P{}", (seconds * 1000.0).round() as u64),
+        _ => format!("G4 P{}", num(seconds, 3)),
+    }
+}
+
+impl Writer {
+    /// A rapid of Z alone (the X and Y words are not written, whether known or not).
+    fn retract(&mut self, z: f64) {
+        let d = self.decimals;
+        if self.machine.z.is_some_and(|old| num(old, d) == num(z, d)) {
+            return;
+        }
+        let word = if self.machine.motion == Some(Motion::Rapid) {
+            ""
+        } else {
+            "G0 "
+        };
+        self.machine.motion = Some(Motion::Rapid);
+        self.machine.z = Some(z);
+        self.line(&format!("{word}Z{}", num(z, d)));
+    }
+
+    /// The controller forgets where it is (after a tool change or a pause): the next move
+    /// writes every axis.
+    fn forget_position(&mut self) {
+        self.machine = Machine::default();
+    }
+
+    fn spindle_on(&mut self, tool: &Tool, dwell_s: f64, coolant: Coolant) {
+        self.line(&format!(
+            "S{} M3",
+            num(tool.spindle_rpm, 0).trim_end_matches('.')
+        ));
+        if dwell_s > 0.0 {
+            self.line(&dwell(self.dialect, dwell_s));
+        }
+        match coolant {
+            Coolant::Flood => self.line("M8"),
+            Coolant::Mist => self.line("M7"),
+            Coolant::Off => {}
+        }
+    }
+}
+
+/// "T1: 6 mm end mill, 4 flutes, flutes 18 mm (assumed), 10.5 mm deep: mills the outline".
+fn tool_line(t: &ToolUse, flutes: Option<u32>) -> String {
+    format!(
+        "T{}: {} mm {}{}, flutes {} mm{}, {} mm deep: {}",
+        t.number,
+        txt(t.diameter_mm, 3),
+        match t.kind {
+            ToolKind::EndMill => "end mill",
+            ToolKind::Drill => "drill",
+        },
+        flutes.map_or(String::new(), |n| format!(" {n}-flute")),
+        txt(t.flute_length_mm, 2),
+        if t.flute_length_assumed {
+            " assumed"
+        } else {
+            ""
+        },
+        txt(t.depth_mm, 3),
+        t.purpose
+    )
+}
+
 /// The G-code program text and its block count.
-pub fn write(design: &Design, passes: &[Pass], summary: &ToolpathSummary) -> (String, usize) {
+///
+/// Every tool starts the same way: the tool change (`M6`, or for GRBL a pause `M0` after a
+/// comment naming the tool), then a rapid of Z alone to the safe height, then the spindle with
+/// a dwell, then coolant. Passes start with Z alone up to the safe height, X and Y across,
+/// rapid down to 1 mm above the stock, and a feed down to the floor already cut there.
+pub fn write(design: &Design, jobs: &[Job], summary: &ToolpathSummary) -> (String, usize) {
     let spec = &design.spec;
     let m = &spec.machining;
     let law = &design.law.law;
@@ -167,6 +262,7 @@ pub fn write(design: &Design, passes: &[Pass], summary: &ToolpathSummary) -> (St
         machine: Machine::default(),
         blocks: 0,
     };
+    let d = w.decimals;
     if m.dialect == Dialect::Fanuc {
         w.line("%");
         w.line("O1000");
@@ -178,115 +274,150 @@ pub fn write(design: &Design, passes: &[Pass], summary: &ToolpathSummary) -> (St
     ));
     w.comment(&format!("camspring run {}", spec.run_id()));
     w.comment(&format!("law {}", law.describe()));
+    let st = &summary.stock;
     w.comment(&format!(
-        "tool 1: {} mm flat end mill, {} rpm",
-        m.tool_diameter_mm, m.spindle_rpm
+        "stock {} plate, at least {} x {} x {} mm",
+        st.material,
+        txt(st.size_mm[0], 1),
+        txt(st.size_mm[1], 1),
+        txt(st.size_mm[2], 2)
     ));
     w.comment(&format!(
-        "stock top Z{} thickness {} breakthrough {} mm",
-        m.stock_top_z_mm, spec.part.thickness_mm, m.breakthrough_mm
+        "stock corner X{} Y{}, top Z{}; X0 Y0 = the drawing datum",
+        txt(st.corner_mm[0], 2),
+        txt(st.corner_mm[1], 2),
+        txt(st.top_z_mm, 3)
+    ));
+    let tools = m.tool_list();
+    for t in &summary.tools {
+        let flutes = tools
+            .iter()
+            .find(|x| x.number == t.number)
+            .and_then(|x| x.flutes);
+        w.comment(&tool_line(t, flutes));
+    }
+    w.comment(&format!(
+        "estimated cycle time {:.1} min [tool changes not counted]",
+        summary.estimated_minutes
     ));
     w.comment(&format!(
-        "tolerance {} mm, {} rough levels + finish, allowance {} mm",
-        m.tolerance_mm, summary.rough_levels, m.stock_allowance_mm
+        "tolerance {} mm; outline: {} rough levels to a {} mm skin, allowance {} mm, then finish",
+        m.tolerance_mm, summary.rough_levels, m.skin_mm, m.stock_allowance_mm
     ));
     w.comment(&format!(
-        "units mm, {}, dialect {}",
+        "units mm, {}, ramp {} deg, dialect {}",
         if m.climb { "climb" } else { "conventional" },
+        m.ramp_angle_deg,
         dialect_name(m.dialect)
     ));
-    w.line(&format!("G21 G90 G17 G94 {}", m.work_offset));
-    match m.dialect {
-        Dialect::Linuxcnc => w.line("T1 M6"),
-        Dialect::Fanuc => {
-            w.line("T1 M6");
-            w.line(&format!("G43 H1 Z{}", num(m.safe_z_mm, w.decimals)));
-            w.machine.z = Some(m.safe_z_mm);
-        }
-        Dialect::Grbl => w.comment("load tool 1 now (GRBL has no tool change)"),
+    for warning in &summary.warnings {
+        w.comment(&format!("WARNING: {warning}"));
     }
-    w.line(&format!(
-        "S{} M3",
-        num(m.spindle_rpm, 0).trim_end_matches('.')
-    ));
-    match m.coolant {
-        Coolant::Flood => w.line("M8"),
-        Coolant::Mist => w.line("M7"),
-        Coolant::Off => {}
-    }
+    w.line(&format!("G21 G90 G17 G94 G40 G49 G80 {}", m.work_offset));
     let clearance = (m.stock_top_z_mm + 1.0).min(m.safe_z_mm);
-    let (x0, y0) = passes
-        .first()
-        .map_or((0.0, 0.0), |p| (p.entry[0], p.entry[1]));
-    w.rapid(
-        w.machine.x.unwrap_or(x0),
-        w.machine.y.unwrap_or(y0),
-        m.safe_z_mm,
-    );
-    for p in passes {
-        w.comment(&format!("{} at Z{}", p.label, num(p.z_mm, 3)));
-        let z_now = w.machine.z.unwrap_or(m.safe_z_mm);
-        w.rapid(
-            w.machine.x.unwrap_or(p.entry[0]),
-            w.machine.y.unwrap_or(p.entry[1]),
-            z_now.max(m.safe_z_mm),
-        );
-        w.rapid(p.entry[0], p.entry[1], m.safe_z_mm);
-        w.rapid(p.entry[0], p.entry[1], clearance);
-        w.words(
-            Motion::Feed,
-            p.entry[0],
-            p.entry[1],
-            p.z_mm,
-            None,
-            Some(m.plunge_feed_mm_per_min),
-        );
-        let mut from = p.entry;
-        for (k, mv) in p.moves.iter().enumerate() {
-            let z = if p.over_tab[k] { p.tab_z_mm } else { p.z_mm };
-            let was_over = k > 0 && p.over_tab[k - 1];
-            if p.over_tab[k] != was_over {
-                // Onto or off a holding tab: a vertical move at the plunge feed.
-                if p.over_tab[k] {
-                    w.comment("tab");
+    for (n, job) in jobs.iter().enumerate() {
+        let t = &job.tool;
+        if n > 0 {
+            w.line("M5");
+            if m.coolant != Coolant::Off {
+                w.line("M9");
+            }
+            w.retract(m.safe_z_mm);
+        }
+        let what = format!("T{} {}: {}", t.number, t.describe(), job.purpose);
+        match m.dialect {
+            Dialect::Linuxcnc => {
+                w.comment(&what);
+                w.line(&format!("T{} M6", t.number));
+                w.line(&format!("G43 H{}", t.number));
+                w.forget_position();
+                w.retract(m.safe_z_mm);
+            }
+            Dialect::Fanuc => {
+                w.comment(&what);
+                w.line(&format!("T{} M6", t.number));
+                w.line(&format!("G0 G43 H{} Z{}", t.number, num(m.safe_z_mm, d)));
+                w.forget_position();
+                w.machine.z = Some(m.safe_z_mm);
+                w.machine.motion = Some(Motion::Rapid);
+            }
+            Dialect::Grbl => {
+                // GRBL has no tool change: pause for the operator (the first tool is loaded
+                // before the start).
+                w.comment(&what);
+                if n > 0 {
+                    w.comment(&format!(
+                        "load T{} and set its Z zero, then resume",
+                        t.number
+                    ));
+                    w.line("M0");
                 }
+                w.forget_position();
+                w.retract(m.safe_z_mm);
+            }
+        }
+        w.spindle_on(t, m.spindle_dwell_s, m.coolant);
+        if let Some(drill) = &job.drilling {
+            drilling(&mut w, t, drill, m);
+        }
+        for p in &job.passes {
+            w.comment(&format!("{} at Z{}", p.label, num(p.z_mm, 3)));
+            w.retract(m.safe_z_mm);
+            w.rapid(p.entry[0], p.entry[1], m.safe_z_mm);
+            w.rapid(p.entry[0], p.entry[1], clearance);
+            if p.entry_z_mm < clearance {
                 w.words(
                     Motion::Feed,
-                    from[0],
-                    from[1],
-                    z,
+                    p.entry[0],
+                    p.entry[1],
+                    p.entry_z_mm,
                     None,
-                    Some(m.plunge_feed_mm_per_min),
+                    Some(t.plunge_feed_mm_per_min),
                 );
             }
-            if k == 0 {
-                w.comment("lead-in");
-            }
-            if k == p.lead_in {
-                w.comment("contour");
-            }
-            if k + p.lead_out == p.moves.len() {
-                w.comment("lead-out");
-            }
-            match *mv {
-                Move::Line { to } => {
-                    w.words(Motion::Feed, to[0], to[1], z, None, Some(m.feed_mm_per_min))
+            let mut from = p.entry;
+            let n_steps = p.steps.len();
+            for (k, s) in p.steps.iter().enumerate() {
+                if k == 0 && p.ramp > 0 {
+                    w.comment("ramp");
                 }
-                Move::Arc { to, center, ccw } => {
-                    let motion = if ccw { Motion::Ccw } else { Motion::Cw };
-                    w.words(
-                        motion,
-                        to[0],
-                        to[1],
-                        z,
-                        Some((center[0] - from[0], center[1] - from[1])),
-                        Some(m.feed_mm_per_min),
-                    );
+                if k == p.ramp && p.lead_in > 0 {
+                    w.comment("lead-in");
                 }
+                if k == p.ramp + p.lead_in {
+                    w.comment("contour");
+                }
+                if k + p.lead_out == n_steps && p.lead_out > 0 {
+                    w.comment("lead-out");
+                }
+                if p.over_tab[k] && (k == 0 || !p.over_tab[k - 1]) {
+                    w.comment("tab");
+                }
+                let feed = if s.plunge {
+                    t.plunge_feed_mm_per_min
+                } else {
+                    t.feed_mm_per_min
+                };
+                match s.mv {
+                    Move::Line { to } => {
+                        w.words(Motion::Feed, to[0], to[1], s.z_mm, None, Some(feed))
+                    }
+                    Move::Arc { to, center, ccw } => {
+                        let motion = if ccw { Motion::Ccw } else { Motion::Cw };
+                        w.words(
+                            motion,
+                            to[0],
+                            to[1],
+                            s.z_mm,
+                            Some((center[0] - from[0], center[1] - from[1])),
+                            Some(feed),
+                        );
+                    }
+                }
+                from = s.mv.to();
             }
-            from = mv.to();
+            w.retract(m.safe_z_mm);
         }
-        w.rapid(from[0], from[1], m.safe_z_mm);
     }
     w.line("M5");
     if m.coolant != Coolant::Off {
@@ -302,6 +433,79 @@ pub fn write(design: &Design, passes: &[Pass], summary: &ToolpathSummary) -> (St
     let blocks = w.blocks;
     (w.out, blocks)
 }
+
+/// Drilled holes: `G98 G81` (or `G83` with pecks) from the safe height for LinuxCNC and Fanuc;
+/// for GRBL, which has no canned cycles, the same moves written out.
+fn drilling(w: &mut Writer, t: &Tool, drill: &Drilling, m: &MachiningSpec) {
+    let d = w.decimals;
+    w.comment(&format!(
+        "drill holes {} to Z{}",
+        drill
+            .holes
+            .iter()
+            .map(|h| h.0.to_string())
+            .collect::<Vec<_>>()
+            .join(", "),
+        num(drill.z_mm, 3)
+    ));
+    let feed = t.plunge_feed_mm_per_min;
+    if w.dialect == Dialect::Grbl {
+        let top = drill.r_plane_mm;
+        for &(_, c) in &drill.holes {
+            w.retract(m.safe_z_mm);
+            w.rapid(c[0], c[1], m.safe_z_mm);
+            w.rapid(c[0], c[1], top);
+            let depth = top - drill.z_mm;
+            let pecks = drill
+                .peck_mm
+                .map_or(1, |q| ((depth / q) - 1e-9).ceil().max(1.0) as usize);
+            for k in 1..=pecks {
+                let z = top - depth * k as f64 / pecks as f64;
+                if k > 1 {
+                    // Back down in the hole already drilled, to just above its bottom.
+                    let above = top - depth * (k - 1) as f64 / pecks as f64 + PECK_CLEARANCE_MM;
+                    w.rapid(c[0], c[1], above.min(top));
+                }
+                w.words(Motion::Feed, c[0], c[1], z, None, Some(feed));
+                w.rapid(c[0], c[1], top);
+            }
+            w.retract(m.safe_z_mm);
+        }
+        return;
+    }
+    w.retract(m.safe_z_mm);
+    for (k, &(_, c)) in drill.holes.iter().enumerate() {
+        let xy = format!("X{} Y{}", num(c[0], d), num(c[1], d));
+        if k == 0 {
+            let cycle = match drill.peck_mm {
+                Some(q) => format!(
+                    "G98 G83 {xy} Z{} R{} Q{}",
+                    num(drill.z_mm, d),
+                    num(drill.r_plane_mm, d),
+                    num(q, d)
+                ),
+                None => format!(
+                    "G98 G81 {xy} Z{} R{}",
+                    num(drill.z_mm, d),
+                    num(drill.r_plane_mm, d)
+                ),
+            };
+            w.line(&format!("{cycle} F{}", num(feed, 1)));
+            w.machine.feed = Some(feed);
+        } else {
+            w.line(&xy);
+        }
+        w.machine.x = Some(c[0]);
+        w.machine.y = Some(c[1]);
+    }
+    w.line("G80");
+    w.machine.motion = None;
+    w.machine.z = Some(m.safe_z_mm);
+}
+
+/// How far above the bottom already drilled a peck's rapid return stops (LinuxCNC's G83 uses
+/// 0.254 mm).
+pub const PECK_CLEARANCE_MM: f64 = 0.254;
 
 #[cfg(test)]
 mod tests {

@@ -31,6 +31,7 @@ thickness = "8 mm"
 holes = [{ x = "10 mm", y = "-5 mm", diameter = "4 mm" }, { x = "2 mm", y = "-5 mm", diameter = "3 mm" }]
 [machining]
 tool_diameter = "2 mm"
+flute_length = "12 mm"
 depth_per_pass = "1.5 mm"
 [output]
 chord_tolerance = "0.0001 mm"
