@@ -296,6 +296,29 @@ def test_other_dialects_follow_their_rules(tmp_path, dialect, multi):
     check_program(out, summary, tmp_path, ngc="plain.ngc")
 
 
+@pytest.mark.parametrize("dialect", ["linuxcnc", "grbl", "fanuc"])
+def test_a_shallow_hole_is_drilled_in_one_feed(tmp_path, dialect):
+    """A 6 mm hole through 10 mm (12.3 mm with breakthrough and the drill point) is within three
+    diameters: one feed (G81), or for GRBL the same moves written out."""
+    text = spec_text(dialect)
+    text = text.replace('roller_material = "bearing-steel"', 'roller_material = "bearing-steel"\nholes = [{ x = "12 mm", y = "0 mm", diameter = "6 mm" }]')
+    text += '\n[[machining.tools]]\ndiameter = "6 mm"\n\n[[machining.tools]]\nkind = "drill"\ndiameter = "6 mm"\nspindle_rpm = "2000 rpm"\nplunge_feed = "100 mm/min"\n'
+    text = text.replace('tool_diameter = "6 mm"\n', "")
+    out, summary = design_into(text, tmp_path)
+    lines = (out / "cam.ngc").read_text().splitlines()
+    code = [l for l in lines if not l.startswith("(")]
+    if dialect == "grbl":
+        check_grbl_rules(lines)
+        assert not any("G81" in l or "G83" in l for l in code)
+    else:
+        assert sum(l.startswith("G98 G81 X12. Y0. Z-12.302") for l in code) == 1, code
+    (out / "plain.ngc").write_text("\n".join(plain(lines)) + "\n")
+    canon = check_program(out, summary, tmp_path, ngc="plain.ngc")
+    # One feed down at the hole, to the drill point's depth.
+    drills = [(s, e) for kind, s, e, _, st in moves(canon) if st["tool"] == 2 and kind == "STRAIGHT_FEED"]
+    assert len(drills) == 1 and abs(drills[0][1][2] + 12.3024) < 1e-3, drills
+
+
 def test_multi_tool_program_runs_and_each_tool_starts_safely(tmp_path):
     out, summary = design_into(spec_text(multi=True), tmp_path)
     assert [t["number"] for t in summary["gcode"]["tools"]] == [3, 2, 1]
