@@ -4,32 +4,18 @@
 
 use camspring::design::design;
 use camspring::export::drawing::{drawing_pdf, drawing_svg, text_boxes};
-use camspring::model::{Hole, SheetSize, Spec};
+use camspring::model::{SheetSize, Spec};
 use camspring::part::build;
 use camspring::spec::DEFAULT_SPEC_TOML;
+
+mod common;
 
 fn paper() -> Spec {
     Spec::from_toml(DEFAULT_SPEC_TOML).unwrap()
 }
 
 fn with_holes(mut spec: Spec) -> Spec {
-    spec.part.holes = vec![
-        Hole {
-            x_mm: 12.0,
-            y_mm: 0.0,
-            diameter_mm: 8.0,
-        },
-        Hole {
-            x_mm: 3.0,
-            y_mm: 0.0,
-            diameter_mm: 5.0,
-        },
-        Hole {
-            x_mm: 18.0,
-            y_mm: -5.5,
-            diameter_mm: 3.3,
-        },
-    ];
+    spec.part.holes = common::three_holes();
     spec
 }
 

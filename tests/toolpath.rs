@@ -10,6 +10,8 @@ use camspring::{
     spec::DEFAULT_SPEC_TOML,
 };
 
+mod common;
+
 fn paper() -> Spec {
     Spec::from_toml(DEFAULT_SPEC_TOML).unwrap()
 }
@@ -212,23 +214,7 @@ fn axes(line: &str) -> Vec<char> {
 fn three_tools(dialect: camspring::model::Dialect) -> Spec {
     use camspring::model::{Tool, ToolKind};
     let mut spec = paper();
-    spec.part.holes = vec![
-        Hole {
-            x_mm: 12.0,
-            y_mm: 0.0,
-            diameter_mm: 8.0,
-        },
-        Hole {
-            x_mm: 3.0,
-            y_mm: 0.0,
-            diameter_mm: 5.0,
-        },
-        Hole {
-            x_mm: 18.0,
-            y_mm: -5.5,
-            diameter_mm: 3.3,
-        },
-    ];
+    spec.part.holes = common::three_holes();
     let tool = |number, kind, diameter_mm, flute_length_mm| Tool {
         number,
         kind,

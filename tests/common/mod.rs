@@ -2,7 +2,7 @@
 #![allow(dead_code)]
 
 use camspring::cam::pitch_curve::SynthesisOptions;
-use camspring::model::{Follower, FrictionCorrection, FrictionSource, SpringArrangement};
+use camspring::model::{Follower, FrictionCorrection, FrictionSource, Hole, SpringArrangement};
 use camspring::{
     law::solve,
     model::{ExpLaw, LawTargets},
@@ -93,4 +93,17 @@ pub fn camspring(dir: &std::path::Path, args: &[&str]) -> std::process::Output {
         String::from_utf8_lossy(&out.stderr)
     );
     out
+}
+
+/// Three holes that fit the paper's part: 8 mm and 5 mm on the centre line, 3.3 mm below it
+/// (a pin hole, a bolt hole and a tapping drill's).
+pub fn three_holes() -> Vec<Hole> {
+    [(12.0, 0.0, 8.0), (3.0, 0.0, 5.0), (18.0, -5.5, 3.3)]
+        .iter()
+        .map(|&(x_mm, y_mm, diameter_mm)| Hole {
+            x_mm,
+            y_mm,
+            diameter_mm,
+        })
+        .collect()
 }
