@@ -497,3 +497,81 @@ fn tabs_lift_over_the_straight_edges_or_are_refused() {
         other => panic!("{other:?}"),
     }
 }
+
+#[test]
+fn tool_lists_and_drawing_settings_are_checked_naming_the_key() {
+    let base = include_str!("../specs/paper.toml");
+    let tools = base.replace("tool_diameter = \"6 mm\"\n", "");
+    for (text, key, expected) in [
+        (
+            format!("{base}\n[[machining.tools]]\ndiameter = \"6 mm\"\n"),
+            "machining.tool_diameter",
+            "[[machining.tools]]",
+        ),
+        (
+            format!("{tools}\n[[machining.tools]]\nkind = \"reamer\"\ndiameter = \"6 mm\"\n"),
+            "machining.tools[0].kind",
+            "\"end-mill\", \"drill\"",
+        ),
+        (
+            format!("{tools}\n[[machining.tools]]\nnumber = 2\ndiameter = \"6 mm\"\n[[machining.tools]]\nnumber = 2\ndiameter = \"3 mm\"\n"),
+            "machining.tools[1].number",
+            "no other tool",
+        ),
+        (
+            format!("{tools}\n[[machining.tools]]\nkind = \"drill\"\ndiameter = \"6 mm\"\n"),
+            "machining.tools",
+            "end mill",
+        ),
+        (
+            format!("{tools}\n[[machining.tools]]\ndiameter = \"6 mm\"\nflutes = 0\n"),
+            "machining.tools[0].flutes",
+            "1 to 12",
+        ),
+        (
+            format!("{base}\n[drawing]\nscale = \"3:1\"\n"),
+            "drawing.scale",
+            "standard scale",
+        ),
+        (
+            format!("{base}\n[drawing]\nscale = \"big\"\n"),
+            "drawing.scale",
+            "2:1",
+        ),
+        (
+            format!("{base}\n[drawing]\nsheet = \"a0\"\n"),
+            "drawing.sheet",
+            "\"a4\"",
+        ),
+        (
+            format!("{base}\n[drawing]\ncam_finish = \"0.8 mm\"\n"),
+            "drawing.cam_finish",
+            "um",
+        ),
+        (
+            base.replace("[machining]", "[machining]\nramp_angle = \"60 deg\""),
+            "machining.ramp_angle",
+            "deg",
+        ),
+        (
+            base.replace("[machining]", "[machining]\nskin = \"10 mm\""),
+            "machining.skin",
+            "mm",
+        ),
+    ] {
+        let e = Spec::from_toml(&text).unwrap_err().to_string();
+        assert!(e.contains(key) && e.contains(expected), "{key}: {e}");
+    }
+    // A valid list and drawing section are read as written.
+    let spec = Spec::from_toml(&format!(
+        "{tools}\n[[machining.tools]]\ndiameter = \"5 mm\"\nflute_length = \"20 mm\"\n[[machining.tools]]\nkind = \"drill\"\ndiameter = \"3.3 mm\"\npeck = \"2 mm\"\n[drawing]\nsheet = \"ansi-b\"\nscale = \"1:2\"\ndate = \"2026-11-23\"\ncam_finish = \"0.4 um\"\n"
+    ))
+    .unwrap();
+    assert_eq!(spec.machining.tool_diameter_mm, 5.0);
+    assert_eq!(spec.machining.tools[1].number, 2);
+    assert_eq!(spec.machining.tools[1].peck_mm, Some(2.0));
+    assert_eq!(spec.drawing.sheet, camspring::model::SheetSize::AnsiB);
+    assert_eq!(spec.drawing.scale, Some(0.5));
+    assert!((spec.drawing.cam_finish_ra_um - 0.4).abs() < 1e-12);
+    assert_eq!(spec.drawing.date.as_deref(), Some("2026-11-23"));
+}

@@ -157,10 +157,13 @@ pub fn format_design(s: &DesignSummary, written: &[PathBuf]) -> String {
             for t in &g.toolpath.tools {
                 let _ = writeln!(
                     o,
-                    "           T{} {} mm {:?}, {:.3} mm deep (flutes {:.3} mm{}): {}",
+                    "           T{} {} mm {}, {:.3} mm deep (flutes {:.3} mm{}): {}",
                     t.number,
                     t.diameter_mm,
-                    t.kind,
+                    match t.kind {
+                        crate::model::ToolKind::EndMill => "end mill",
+                        crate::model::ToolKind::Drill => "drill",
+                    },
                     t.depth_mm,
                     t.flute_length_mm,
                     if t.flute_length_assumed {

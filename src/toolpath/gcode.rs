@@ -172,7 +172,7 @@ impl Writer {
 }
 
 /// A number for a comment: as [`num`], without a trailing decimal point ("6", "10.5").
-fn txt(v: f64, decimals: usize) -> String {
+pub(crate) fn txt(v: f64, decimals: usize) -> String {
     num(v, decimals).trim_end_matches('.').to_string()
 }
 

@@ -1092,7 +1092,7 @@ pub fn sanity_warnings(m: &MachiningSpec, tools: &[Tool]) -> Vec<String> {
                 out.push(format!(
                     "{} = {} mm/min is outside milling practice ({lo} to {hi} mm/min); check its unit (\"mm/min\", not \"mm/s\")",
                     key(name),
-                    gcode::num(v, 1)
+                    gcode::txt(v, 1)
                 ));
             }
         }
@@ -1101,15 +1101,15 @@ pub fn sanity_warnings(m: &MachiningSpec, tools: &[Tool]) -> Vec<String> {
             out.push(format!(
                 "{} = {} rpm is outside milling practice ({lo} to {hi} rpm)",
                 key("spindle_rpm"),
-                gcode::num(t.spindle_rpm, 0)
+                gcode::txt(t.spindle_rpm, 0)
             ));
         }
         if t.plunge_feed_mm_per_min > t.feed_mm_per_min {
             out.push(format!(
                 "{} = {} mm/min is faster than the cutting feed ({} mm/min)",
                 key("plunge_feed"),
-                gcode::num(t.plunge_feed_mm_per_min, 1),
-                gcode::num(t.feed_mm_per_min, 1)
+                gcode::txt(t.plunge_feed_mm_per_min, 1),
+                gcode::txt(t.feed_mm_per_min, 1)
             ));
         }
         if let (ToolKind::EndMill, Some(n)) = (t.kind, t.flutes) {
@@ -1121,8 +1121,8 @@ pub fn sanity_warnings(m: &MachiningSpec, tools: &[Tool]) -> Vec<String> {
                     t.number,
                     t.describe(),
                     load,
-                    gcode::num(t.feed_mm_per_min, 1),
-                    gcode::num(t.spindle_rpm, 0),
+                    gcode::txt(t.feed_mm_per_min, 1),
+                    gcode::txt(t.spindle_rpm, 0),
                     max,
                     if load < CHIP_LOAD_MIN_MM {
                         "the edge rubs: raise the feed or lower the speed"
