@@ -934,14 +934,41 @@ fn outline_passes(
         let mut was_over = false;
         for (mv, over) in contour_moves.into_iter().zip(contour_tabs) {
             let zk = if over { tab_z } else { z };
-            if over != was_over {
-                // Onto or off a holding tab: a vertical move at the plunge feed.
+            if over && !was_over {
+                // Onto a holding tab: straight up at the plunge feed.
                 steps.push(Step {
                     mv: Move::Line { to: from },
                     z_mm: zk,
                     plunge: true,
                 });
                 over_tab.push(over);
+            } else if !over && was_over {
+                // Off it: zig-zag down along the next straight move at the ramp angle, then
+                // back to the tab's end at depth, so that the bridge stays the tab's width.
+                let to = mv.to();
+                let len = dist(from, to);
+                let drop = tab_z - z;
+                let ramp_len = len.min(drop / lv.tan_ramp).max(1e-9);
+                let far = add(from, scale(sub(to, from), ramp_len / len.max(1e-12)));
+                let legs = ((drop / (ramp_len * lv.tan_ramp)) - 1e-9).ceil().max(1.0) as usize;
+                for j in 1..=legs {
+                    steps.push(Step {
+                        mv: Move::Line {
+                            to: if j % 2 == 1 { far } else { from },
+                        },
+                        z_mm: tab_z - drop * j as f64 / legs as f64,
+                        plunge: false,
+                    });
+                    over_tab.push(false);
+                }
+                if legs % 2 == 1 {
+                    steps.push(Step {
+                        mv: Move::Line { to: from },
+                        z_mm: z,
+                        plunge: false,
+                    });
+                    over_tab.push(false);
+                }
             }
             steps.push(Step {
                 mv,

@@ -161,7 +161,12 @@ def check_program(out, summary, tmp_path, ngc="cam.ngc"):
             worst_gouge = min(worst_gouge, (distance_to_part(pts, poly, holes) - r_tool).min())
         if st["label"].startswith("outline finish") and st["section"] == "contour":
             if not moves_xy:
-                continue  # vertical move onto or off a holding tab
+                continue  # vertical move onto a holding tab
+            if abs(e[2] - s[2]) > 1e-9:
+                # The ramp down off a holding tab, along the contour.
+                assert z_final - 1e-9 <= min(s[2], e[2]) and max(s[2], e[2]) <= tab_top + 1e-9
+                finish_pts.append(pts)
+                continue
             assert abs(e[2] - s[2]) < 1e-9 and (abs(e[2] - z_final) < 1e-9 or abs(e[2] - tab_top) < 1e-9)
             finish_pts.append(pts)
         if st["label"].startswith("hole") and st["label"].split()[2] == "finish" and st["section"] == "contour":
@@ -380,11 +385,12 @@ def test_the_part_stays_attached_until_the_finishing_pass(tmp_path):
         assert abs(rough - (bottom + m["skin_mm"])) < 1e-9
 
 
-def test_entries_ramp_within_the_stated_angle(tmp_path):
+@pytest.mark.parametrize("extra", ['ramp_angle = "5 deg"\n', 'tabs = 3\ntab_width = "2.5 mm"\n'])
+def test_entries_ramp_within_the_stated_angle(tmp_path, extra):
     """No end mill plunges into material: descents with no sideways motion stay in air (above
     the stock or above the floor already cut at that point); all others descend at most at
-    the ramp angle."""
-    out, summary = design_into(spec_text(multi=True, extra='ramp_angle = "5 deg"\n'), tmp_path)
+    the ramp angle, also coming off a holding tab."""
+    out, summary = design_into(spec_text(multi=True, extra=extra), tmp_path)
     canon = interpret(out / "cam.ngc", tmp_path)
     m = summary["spec"]["machining"]
     kinds = {t["number"]: t["kind"] for t in summary["gcode"]["tools"]}
