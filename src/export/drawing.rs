@@ -412,6 +412,16 @@ fn rows_in(height: f64, header_rows: usize) -> usize {
 
 /// The drawing of a design's part.
 pub fn drawing_svg(design: &Design, part: &Part) -> String {
+    layout(design, part).doc.to_string()
+}
+
+/// Every text box of a drawing, as the layout placed them (for the layout tests).
+pub fn text_boxes(design: &Design, part: &Part) -> Vec<TextBox> {
+    layout(design, part).texts
+}
+
+/// Lays the sheet out: its SVG and the boxes of its texts.
+fn layout(design: &Design, part: &Part) -> Sheet {
     let spec = &design.spec;
     let dr = &spec.drawing;
     let (sheet_w, sheet_h) = dr.sheet.size_mm();
@@ -1244,42 +1254,7 @@ pub fn drawing_svg(design: &Design, part: &Part) -> String {
         }
         y += row_h;
     }
-    sh.doc.to_string()
-}
-
-/// Every text box of a drawing, for the layout tests.
-pub fn text_boxes(design: &Design, part: &Part) -> Vec<TextBox> {
-    let svg = drawing_svg(design, part);
-    let mut out = Vec::new();
-    for el in svg.split("<text").skip(1) {
-        let attr = |name: &str| -> Option<String> {
-            let key = format!(" {name}=\"");
-            let start = el.find(&key)? + key.len();
-            Some(el[start..start + el[start..].find('"')?].to_string())
-        };
-        let num = |name: &str| attr(name).and_then(|v| v.parse::<f64>().ok());
-        let (Some(x), Some(y), Some(size)) = (num("x"), num("y"), num("font-size")) else {
-            continue;
-        };
-        let content = el
-            .split_once('>')
-            .and_then(|(_, rest)| rest.split_once("</text>"))
-            .map(|(t, _)| {
-                t.trim()
-                    .replace("&lt;", "<")
-                    .replace("&gt;", ">")
-                    .replace("&amp;", "&")
-            })
-            .unwrap_or_default();
-        let anchor = match attr("text-anchor").as_deref() {
-            Some("middle") => Anchor::Middle,
-            Some("end") => Anchor::End,
-            _ => Anchor::Start,
-        };
-        let vertical = attr("transform").is_some();
-        out.push(Sheet::text_box(x, y, &content, size, anchor, vertical));
-    }
-    out
+    sh
 }
 
 /// Why drawing.pdf could not be made.

@@ -36,6 +36,16 @@ pub enum ToolKind {
     Drill,
 }
 
+impl ToolKind {
+    /// "end mill", "drill".
+    pub fn name(self) -> &'static str {
+        match self {
+            ToolKind::EndMill => "end mill",
+            ToolKind::Drill => "drill",
+        }
+    }
+}
+
 /// One tool of the program's list (`[[machining.tools]]`).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Tool {
@@ -71,11 +81,7 @@ impl Tool {
 
     /// "6 mm end mill", "3.3 mm drill".
     pub fn describe(&self) -> String {
-        let kind = match self.kind {
-            ToolKind::EndMill => "end mill",
-            ToolKind::Drill => "drill",
-        };
-        format!("{} mm {kind}", self.diameter_mm)
+        format!("{} mm {}", self.diameter_mm, self.kind.name())
     }
 }
 

@@ -160,10 +160,7 @@ pub fn format_design(s: &DesignSummary, written: &[PathBuf]) -> String {
                     "           T{} {} mm {}, {:.3} mm deep (flutes {:.3} mm{}): {}",
                     t.number,
                     t.diameter_mm,
-                    match t.kind {
-                        crate::model::ToolKind::EndMill => "end mill",
-                        crate::model::ToolKind::Drill => "drill",
-                    },
+                    t.kind.name(),
                     t.depth_mm,
                     t.flute_length_mm,
                     if t.flute_length_assumed {

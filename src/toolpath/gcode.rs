@@ -15,7 +15,7 @@ use std::fmt::Write as _;
 use super::path::Move;
 use super::{Drilling, Job, ToolUse, ToolpathSummary};
 use crate::design::Design;
-use crate::model::{Coolant, Dialect, MachiningSpec, Tool, ToolKind};
+use crate::model::{Coolant, Dialect, MachiningSpec, Tool};
 
 /// Decimals written for coordinates in a dialect.
 pub fn decimals(d: Dialect) -> usize {
@@ -224,16 +224,13 @@ impl Writer {
 }
 
 /// "T1: 6 mm end mill, 4 flutes, flutes 18 mm (assumed), 10.5 mm deep: mills the outline".
-fn tool_line(t: &ToolUse, flutes: Option<u32>) -> String {
+fn tool_line(t: &ToolUse) -> String {
     format!(
         "T{}: {} mm {}{}, flutes {} mm{}, {} mm deep: {}",
         t.number,
         txt(t.diameter_mm, 3),
-        match t.kind {
-            ToolKind::EndMill => "end mill",
-            ToolKind::Drill => "drill",
-        },
-        flutes.map_or(String::new(), |n| format!(" {n}-flute")),
+        t.kind.name(),
+        t.flutes.map_or(String::new(), |n| format!(" {n}-flute")),
         txt(t.flute_length_mm, 2),
         if t.flute_length_assumed {
             " assumed"
@@ -288,13 +285,8 @@ pub fn write(design: &Design, jobs: &[Job], summary: &ToolpathSummary) -> (Strin
         txt(st.corner_mm[1], 2),
         txt(st.top_z_mm, 3)
     ));
-    let tools = m.tool_list();
     for t in &summary.tools {
-        let flutes = tools
-            .iter()
-            .find(|x| x.number == t.number)
-            .and_then(|x| x.flutes);
-        w.comment(&tool_line(t, flutes));
+        w.comment(&tool_line(t));
     }
     w.comment(&format!(
         "estimated cycle time {:.1} min [tool changes not counted]",

@@ -368,6 +368,8 @@ pub struct ToolUse {
     pub kind: ToolKind,
     /// Diameter.
     pub diameter_mm: f64,
+    /// Flutes, when given.
+    pub flutes: Option<u32>,
     /// Flute length checked against the depth (given or assumed).
     pub flute_length_mm: f64,
     /// Whether the flute length was assumed (not given in the spec).
@@ -633,6 +635,7 @@ pub fn jobs(design: &Design, part: &Part) -> Result<(Vec<Job>, ToolpathSummary),
             number: tool.number,
             kind: tool.kind,
             diameter_mm: tool.diameter_mm,
+            flutes: tool.flutes,
             flute_length_mm: tool.usable_length_mm(),
             flute_length_assumed: tool.flute_length_mm.is_none(),
             depth_mm: depth,
@@ -1025,10 +1028,11 @@ fn cycle(jobs: &[Job], m: &MachiningSpec, clearance: f64) -> (f64, f64) {
                 go(c, &mut at, &mut rapid);
                 let depth = d.r_plane_mm - d.z_mm;
                 let pecks = d.peck_mm.map_or(1.0, |q| (depth / q).ceil());
-                // Each peck feeds its own depth; the retracts and returns are rapids.
+                // The drill feeds the depth once; each peck's retract and return are rapids
+                // of about half the depth on average each.
                 cut += depth;
                 minutes += depth / t.plunge_feed_mm_per_min;
-                rapid += 2.0 * pecks * depth / 2.0;
+                rapid += pecks * depth;
                 at = Some((c, d.r_plane_mm));
             }
         }
