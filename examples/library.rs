@@ -67,7 +67,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     )?;
     let id = run.identification.as_ref().ok_or("identification ran")?;
     let designed = d.law.exponential().ok_or("an exponential law")?;
-    let verdict = validate(designed, id, &run.run, &log.position_mm, 0.03, None);
+    let verdict = validate(designed, id, &run, &log.position_mm, 0.03, None);
     println!("validate: {}", if verdict.pass { "PASS" } else { "FAIL" });
     Ok(())
 }

@@ -4,7 +4,7 @@
 //!
 //! Run: `cargo run --release --example nees [seeds] [m d0 d1 d2] [sines|steps|ramp-hold] [speed]`.
 //! The environment variables `Q_D`, `Q_XDD` and `Q_SIGMA` override the process noise of those
-//! states (tuning experiments).
+//! states (tuning experiments), and `TWINS` the number of twins (0: the filter's raw constants).
 
 use camspring::estimate::ekf::idx;
 use camspring::estimate::sim::{simulate, Dynamics, Profile, SimSettings};
@@ -54,6 +54,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 if let Some(v) = std::env::var(name).ok().and_then(|v| v.parse().ok()) {
                     opts.q.push((state, v));
                 }
+            }
+            if let Some(n) = std::env::var("TWINS").ok().and_then(|v| v.parse().ok()) {
+                opts.twins = n;
             }
             let run = estimate(&log, &opts, |_, _| {}).ok()?;
             let z = run.run.last.z;

@@ -723,14 +723,11 @@ pub fn run_validate(
                     &identified
                 }
             };
-            let run = est
-                .as_ref()
-                .filter(|e| e.consistency.consistent)
-                .map(|e| &e.run);
+            let consistent = est.as_ref().filter(|e| e.consistency.consistent);
             let mut v = crate::verdict::validate::validate_with(
                 law,
                 id,
-                run,
+                consistent,
                 &log.position_mm,
                 tolerance,
                 band.as_ref(),

@@ -48,8 +48,11 @@ fn the_acceptance_matrix() {
     );
     // validate passes the true law and fails a law with k2 5 % high, judging through the
     // filter where it is consistent and through identification where it is not.
+    // (The filter's stiffness path is checked against identification's law: on a slow run
+    // of the light transmission it was biased at low stiffness, and its stiffness line failed
+    // the true law, until that run was flagged and identification judged.)
     let true_fails = out.iter().filter(|o| !o.validate_true).count();
-    assert!(true_fails <= 1, "the true law fails in {true_fails} cases");
+    assert_eq!(true_fails, 0, "the true law fails in {true_fails} cases");
     for o in &out {
         assert!(!o.validate_off, "a law 5 % off passes: {o}");
     }
@@ -59,13 +62,29 @@ fn the_acceptance_matrix() {
     }
     // It meets its target (k2 within 0.5 %, M within 2 % where identification resolves M,
     // both within 3 sigma), or says that it does not: flagged not consistent, or a warning that
-    // this log determines k2 or M less precisely, with honest errors. Five runs miss silently,
-    // each by a k2 error of 3.0-3.7 of its standard deviations (docs/CALIBRATION.md).
+    // this log determines k2 or M less precisely, with honest errors. Before the twins took
+    // the filter's k2 bias out, five runs missed silently, by k2 errors of 3.0-3.7 of its
+    // standard deviations (the light transmission's ramp-hold and steps, and slow runs).
     let silent = out.iter().filter(|o| !o.estimate_meets_or_says()).count();
     assert!(
-        silent <= 6,
+        silent <= 1,
         "{silent} of 72 runs miss the filter's target silently"
     );
+    // Its standard deviations are honest wherever it says it is consistent: k2 within 3 of
+    // them on every run, and M wherever identification resolves it (relative standard
+    // deviation below 10 %).
+    // One run is known to miss: a heavy steps run whose filter M is 2.8 % off at 0.4 %
+    // claimed, where identification, at 2.2 %, covers it (docs/CALIBRATION.md).
+    let mut m_beyond = 0;
+    for o in out.iter().filter(|o| o.ekf_inconsistent.is_none()) {
+        if let Ok((_, _, zk, zm)) = o.ekf {
+            assert!(zk.abs() < 3.0, "{o}");
+            if o.m_identifiable && zm.abs() >= 3.0 {
+                m_beyond += 1;
+            }
+        }
+    }
+    assert!(m_beyond <= 1, "{m_beyond} runs with M beyond 3 sigma");
     // Strong Coulomb friction (the paper's Table I, d0 3.8 N, and 4 N) no longer leaves it
     // inconsistent: its sign is read from the force (estimate::pipeline). With the sign from
     // the velocity alone, 21 of these 24 runs were flagged and 2 diverged.

@@ -120,8 +120,8 @@ fn validate_judges_builds_against_the_band_and_says_where_they_leave_it() {
         )
         .unwrap();
         let id = run.identification.as_ref().unwrap();
-        let banded = validate(&designed, id, &run.run, &log.position_mm, 0.03, Some(&band));
-        let flat = validate(&designed, id, &run.run, &log.position_mm, 0.03, None);
+        let banded = validate(&designed, id, &run, &log.position_mm, 0.03, Some(&band));
+        let flat = validate(&designed, id, &run, &log.position_mm, 0.03, None);
         (banded, flat)
     };
     // 5 % stiffer springs: inside what +-10 % springs allow, but more than a flat 3 %.

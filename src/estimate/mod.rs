@@ -16,4 +16,5 @@ pub mod noise;
 pub mod pipeline;
 pub mod sg;
 pub mod sim;
+pub mod twin;
 pub mod window;

@@ -363,6 +363,7 @@ pub fn estimate_json(est: &EstimateRun) -> Value {
             "state": state, "relative_std": rel, "log_length_factor_for_target": longer,
         })).collect::<Vec<_>>(),
         "recovery": est.recovery,
+        "twins": est.twins,
         "consistency": est.consistency,
         "settings": settings,
     })
@@ -390,6 +391,31 @@ pub fn format_consistency(est: &EstimateRun) -> String {
     }
     if let Some(r) = &est.recovery {
         let _ = writeln!(s, "note: {r}");
+    }
+    if let Some(t) = &est.twins {
+        for c in &t.states {
+            let _ = writeln!(
+                s,
+                "  {} corrected for the filter's bias, {:+.3} % of it, measured on {} twins of the \
+                 log (simulated with identification's transmission, {:.0} s each): {:.6} +- {:.6} \
+                 before, {:.6} +- {:.6} after",
+                c.state,
+                100.0 * c.bias / c.corrected.abs().max(1e-300),
+                c.errors.len(),
+                t.span_s,
+                c.filter,
+                c.filter_std,
+                c.corrected,
+                c.corrected_std
+            );
+        }
+        if t.diverged > 0 {
+            let _ = writeln!(
+                s,
+                "note: the filter diverged on {} of {} twins of the log (left out)",
+                t.diverged, t.twins
+            );
+        }
     }
     for (state, rel, longer) in est.imprecise() {
         let _ = writeln!(

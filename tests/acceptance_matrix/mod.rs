@@ -310,7 +310,7 @@ pub fn run_case(case: &Case) -> Outcome {
         ..law
     };
     // As `camspring validate` does: a filter that is not consistent does not judge.
-    let ekf = run.consistency.consistent.then_some(&run.run);
+    let ekf = run.consistency.consistent.then_some(&run);
     outcome.validate_true = validate_with(&law, id, ekf, &log.position_mm, 0.03, None).pass;
     outcome.validate_off = validate_with(&off, id, ekf, &log.position_mm, 0.03, None).pass;
     outcome

@@ -211,6 +211,7 @@ fn filter_options(f: &FilterArgs, s: &Sensors) -> Result<EstimateOptions, Error>
     opts.r_position_mm2 = f.r;
     opts.position_offset = f.position_offset;
     opts.identify_span_s = f.identify_span;
+    opts.twins = f.twins.into();
     app::with_init(opts, &f.init)
 }
 

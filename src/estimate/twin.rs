@@ -1,0 +1,469 @@
+//! Twin logs: simulated copies of a calibration log with known truth, on which the filter's
+//! own bias in its constants is measured and then taken out of the log's estimates.
+//!
+//! The EKF takes the measured force rate as its input and treats that input's noise as
+//! process noise. Where the force noise dominates the dynamics (a light transmission, a slow
+//! run), the filter's constants come out biased: on a light transmission's ramp-hold log, k2
+//! 0.3 to 1.2 % low, 3 to 5 of its own standard deviations, where identification of the same
+//! log is within 0.1 %. The bias is a property of the filter on this motion at these noise
+//! levels, so it is measured the way a simulation study would, on the log's own motion:
+//!
+//! - **Truth:** the transmission identification found (the filter's start), with the
+//!   filter's held states at their held values.
+//! - **Motion:** the logged position smoothed over identification's window (zero phase), then
+//!   through a fast third-order Butterworth low-pass ([`MotionFilter`]). Its x, xd and xdd are
+//!   the state of one linear system, so they are exact derivatives of one smooth motion, as
+//!   the model requires; the smoothing before it keeps the motion's shape and removes the
+//!   noise. A causal low-pass alone at the window's band did neither: on a heavy
+//!   transmission's ramp-hold it weakened the accelerations and moved M's bias by 1.5 %.
+//! - **Force:** m xdd + d1 xd + d2 xd^3 + d0 sgn(xd) + mu exp(k2 x) + F0 along that motion, the
+//!   friction's sign taken where the velocity is beyond its noise.
+//! - **Noise:** fresh white noise at the sensors' variances, a different seed per twin.
+//!
+//! The filter runs on each twin as on the log, from a start drawn about the truth with
+//! identification's standard deviations. Each twin's error in M, k2 and d2 is known; their
+//! mean is the bias. The pipeline subtracts it and adds its uncertainty (and the twins'
+//! scatter, if wider than the filter's own standard deviation) to the variance.
+
+use std::collections::VecDeque;
+
+use nalgebra::{Matrix3, Matrix4, Vector3};
+use rand::{rngs::StdRng, SeedableRng};
+use rand_distr::{Distribution, StandardNormal};
+use serde::Serialize;
+
+use super::log::Sample;
+use super::sg;
+use crate::model::ExpLaw;
+
+/// The transmission a twin is simulated with.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TwinTruth {
+    /// Inertia (N s^2/mm).
+    pub m_n_s2_per_mm: f64,
+    /// Coulomb friction (N).
+    pub d0_n: f64,
+    /// Linear damping (N s/mm).
+    pub d1_n_s_per_mm: f64,
+    /// Cubic damping (N s^3/mm^3).
+    pub d2_n_s3_per_mm3: f64,
+    /// The spring law.
+    pub law: ExpLaw,
+}
+
+/// A third-order Butterworth low-pass of the logged position, discretised exactly for an
+/// input held over each sample. Its state [x, xd, xdd] is one smooth motion.
+#[derive(Debug, Clone)]
+pub struct MotionFilter {
+    phi: Matrix3<f64>,
+    gamma: Vector3<f64>,
+    state: Option<Vector3<f64>>,
+}
+
+impl MotionFilter {
+    /// Cut-off `cutoff_hz` (at most a fifth of the sampling rate) for samples every `dt_s`.
+    pub fn new(cutoff_hz: f64, dt_s: f64) -> MotionFilter {
+        let w = std::f64::consts::TAU * cutoff_hz.min(0.2 / dt_s);
+        // x''' = w^3 (u - x) - 2 w^2 x' - 2 w x'': poles of s^3 + 2w s^2 + 2w^2 s + w^3.
+        let mut m = Matrix4::zeros();
+        m[(0, 1)] = 1.0;
+        m[(1, 2)] = 1.0;
+        m[(2, 0)] = -w * w * w;
+        m[(2, 1)] = -2.0 * w * w;
+        m[(2, 2)] = -2.0 * w;
+        m[(2, 3)] = w * w * w;
+        let e = (m * dt_s).exp();
+        MotionFilter {
+            phi: e.fixed_view::<3, 3>(0, 0).into_owned(),
+            gamma: e.fixed_view::<3, 1>(0, 3).into_owned(),
+            state: None,
+        }
+    }
+
+    /// Takes the next logged position; returns [x, xd, xdd] of the smooth motion (mm, mm/s,
+    /// mm/s^2). It starts at rest at the first position.
+    pub fn push(&mut self, position_mm: f64) -> [f64; 3] {
+        let s = match self.state {
+            None => Vector3::new(position_mm, 0.0, 0.0),
+            Some(s) => self.phi * s + self.gamma * position_mm,
+        };
+        self.state = Some(s);
+        [s[0], s[1], s[2]]
+    }
+}
+
+/// Makes one twin's samples from the log's as they arrive, lagging them by half a window.
+///
+/// The logged position is first smoothed over identification's window (the zero-phase
+/// Savitzky-Golay position kernel, every s-th sample of long windows, as the friction stage
+/// does), which keeps the motion's shape and lag-free timing but not exact derivatives. A fast
+/// third-order Butterworth ([`MotionFilter`], cut-off [`TWIN_MOTION_CUTOFF_WINDOWS`] over the
+/// window, far above the motion it passes) then makes x, xd and xdd one motion.
+#[derive(Debug, Clone)]
+pub struct TwinSource {
+    truth: TwinTruth,
+    weights: Vec<f64>,
+    stride: usize,
+    reach: usize,
+    positions: VecDeque<f64>,
+    waiting: VecDeque<(usize, f64)>,
+    last: Option<f64>,
+    motion: MotionFilter,
+    band_mm_per_s: f64,
+    rng: StdRng,
+    force_std_n: f64,
+    position_std_mm: f64,
+    /// Twin samples ready, in order, with their index in the log.
+    pub out: VecDeque<(usize, Sample)>,
+}
+
+/// The most points of the twin's smoothing kernel (longer windows use every s-th sample).
+pub const TWIN_KERNEL_POINTS: usize = 701;
+
+/// The twin motion's Butterworth cut-off, in cycles per smoothing window. Up to one cycle per
+/// window, where the smoothing kernel passes the motion, its gain is within 0.07 % of 1 and
+/// its delay constant; above, it removes what the kernel's side lobes let through of the
+/// position noise. At 1.5 (a filter that also shapes the motion) M's twin bias was 1.5 %
+/// off on heavy ramp-hold runs; at 8 the side lobes' noise made a jerky motion whose M bias
+/// was 3 % off on sines; k2's bias moved little over that range.
+pub const TWIN_MOTION_CUTOFF_WINDOWS: f64 = 3.0;
+
+impl TwinSource {
+    /// A twin of a log sampled every `dt_s`, smoothed over `window` samples, with white
+    /// noise of the given variances drawn from `seed`.
+    pub fn new(
+        truth: TwinTruth,
+        window: usize,
+        dt_s: f64,
+        force_variance_n2: f64,
+        position_variance_mm2: f64,
+        seed: u64,
+    ) -> TwinSource {
+        let window = window.max(sg::MIN_WINDOW);
+        let stride = window.div_ceil(TWIN_KERNEL_POINTS).max(1);
+        let diff = sg::Differentiator::new((window / stride) | 1);
+        let h = dt_s * stride as f64;
+        let window_s = diff.window() as f64 * h;
+        let motion = MotionFilter::new(TWIN_MOTION_CUTOFF_WINDOWS / window_s, dt_s);
+        // Friction acts where the motion's velocity is beyond four standard deviations of the
+        // smoothed noise's: at rest, the position noise left after smoothing does not flip it.
+        let band_mm_per_s = 4.0
+            * diff
+                .noise_variance(sg::MOTION_VELOCITY, position_variance_mm2, h)
+                .max(0.0)
+                .sqrt();
+        TwinSource {
+            truth,
+            weights: diff.weights[sg::POSITION].clone(),
+            stride,
+            reach: diff.half * stride,
+            positions: VecDeque::new(),
+            waiting: VecDeque::new(),
+            last: None,
+            motion,
+            band_mm_per_s,
+            rng: StdRng::seed_from_u64(seed),
+            force_std_n: force_variance_n2.max(0.0).sqrt(),
+            position_std_mm: position_variance_mm2.max(0.0).sqrt(),
+            out: VecDeque::new(),
+        }
+    }
+
+    /// Takes logged sample `i` (in order from 0).
+    pub fn push(&mut self, i: usize, s: &Sample) {
+        let span = 2 * self.reach + 1;
+        self.positions.push_back(s.position_mm);
+        if self.positions.len() > span {
+            self.positions.pop_front();
+        }
+        self.waiting.push_back((i, s.t_s));
+        if self.positions.len() < span {
+            return;
+        }
+        let smoothed: f64 = self
+            .weights
+            .iter()
+            .enumerate()
+            .map(|(j, w)| w * self.positions[j * self.stride])
+            .sum();
+        let centre = i - self.reach;
+        // The first smoothed value also stands for the samples before its centre.
+        while let Some(&(j, t)) = self.waiting.front() {
+            if j > centre {
+                break;
+            }
+            self.waiting.pop_front();
+            self.emit(j, t, smoothed);
+        }
+        self.last = Some(smoothed);
+    }
+
+    /// After the last sample: the last half window takes the last smoothed value (a log
+    /// shorter than a window, the mean of its positions).
+    pub fn finish(&mut self) {
+        let x = self.last.unwrap_or_else(|| {
+            self.positions.iter().sum::<f64>() / self.positions.len().max(1) as f64
+        });
+        while let Some((j, t)) = self.waiting.pop_front() {
+            self.emit(j, t, x);
+        }
+    }
+
+    /// The twin's sample `i` at time `t_s`, its motion driven by the smoothed position.
+    fn emit(&mut self, i: usize, t_s: f64, smoothed_mm: f64) {
+        let [x, v, a] = self.motion.push(smoothed_mm);
+        let t = &self.truth;
+        let sign = if v > self.band_mm_per_s {
+            1.0
+        } else if v < -self.band_mm_per_s {
+            -1.0
+        } else {
+            0.0
+        };
+        let force = t.m_n_s2_per_mm * a
+            + t.d1_n_s_per_mm * v
+            + t.d2_n_s3_per_mm3 * v * v * v
+            + t.d0_n * sign
+            + t.law.force_n(x);
+        let force_noise: f64 = StandardNormal.sample(&mut self.rng);
+        let position_noise: f64 = StandardNormal.sample(&mut self.rng);
+        self.out.push_back((
+            i,
+            Sample {
+                t_s,
+                force_n: force + self.force_std_n * force_noise,
+                position_mm: x + self.position_std_mm * position_noise,
+            },
+        ));
+    }
+}
+
+/// A standard normal draw from `seed` (for a twin's start).
+pub fn standard_normals<const N: usize>(seed: u64) -> [f64; N] {
+    let mut rng = StdRng::seed_from_u64(seed);
+    std::array::from_fn(|_| StandardNormal.sample(&mut rng))
+}
+
+/// What the twins said about one of the filter's constants.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TwinState {
+    /// The state's name with its unit.
+    pub state: &'static str,
+    /// The filter's value on the log, before the correction.
+    pub filter: f64,
+    /// The filter's own standard deviation on the log.
+    pub filter_std: f64,
+    /// Each twin's error (estimate minus truth).
+    pub errors: Vec<f64>,
+    /// Their mean: the bias taken out.
+    pub bias: f64,
+    /// The standard deviation of the twins' errors about their mean.
+    pub scatter: f64,
+    /// The reported value: filter minus bias.
+    pub corrected: f64,
+    /// Its standard deviation: the larger of the filter's and the scatter, with the bias's
+    /// own uncertainty (scatter^2 / twins) added.
+    pub corrected_std: f64,
+}
+
+/// The twins' verdict on the filter's constants.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TwinBias {
+    /// Twins run.
+    pub twins: usize,
+    /// Twins whose filter diverged (left out).
+    pub diverged: usize,
+    /// Length of log each twin copies (s): the identification span, at most the log.
+    pub span_s: f64,
+    /// The window the logged motion was smoothed over (s).
+    pub smoothing_window_s: f64,
+    /// One entry per constant corrected ([`super::pipeline::TWIN_CORRECTED`]).
+    pub states: Vec<TwinState>,
+}
+
+impl TwinBias {
+    /// Combines the twins' errors on each constant with the filter's value on the log.
+    /// `constants` holds (name, filter value, filter std, errors); constants with fewer than
+    /// two errors are left out.
+    pub fn new(
+        twins: usize,
+        span_s: f64,
+        smoothing_window_s: f64,
+        constants: Vec<(&'static str, f64, f64, Vec<f64>)>,
+    ) -> TwinBias {
+        let mut diverged = 0;
+        let states = constants
+            .into_iter()
+            .filter_map(|(state, filter, filter_std, errors)| {
+                diverged = diverged.max(twins.saturating_sub(errors.len()));
+                let n = errors.len();
+                if n < 2 {
+                    return None;
+                }
+                let bias = errors.iter().sum::<f64>() / n as f64;
+                let scatter = (errors.iter().map(|e| (e - bias).powi(2)).sum::<f64>()
+                    / (n - 1) as f64)
+                    .sqrt();
+                let spread = scatter.max(filter_std);
+                Some(TwinState {
+                    state,
+                    filter,
+                    filter_std,
+                    bias,
+                    scatter,
+                    corrected: filter - bias,
+                    corrected_std: (spread * spread * (1.0 + 1.0 / n as f64)).sqrt(),
+                    errors,
+                })
+            })
+            .collect();
+        TwinBias {
+            twins,
+            diverged,
+            span_s,
+            smoothing_window_s,
+            states,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_motion_filter_passes_a_ramp_with_exact_derivatives_and_unit_gain() {
+        // A ramp of 2 mm/s sampled at 100 Hz: after the transient the filter's velocity is
+        // the ramp's, its acceleration zero, and its position lags by the Butterworth's
+        // group delay at zero frequency, 2 / w.
+        let dt = 0.01;
+        let fc = 1.0;
+        let mut f = MotionFilter::new(fc, dt);
+        let mut last = [0.0; 3];
+        for i in 0..2000 {
+            last = f.push(2.0 * i as f64 * dt);
+        }
+        let t_end = 1999.0 * dt;
+        let w = std::f64::consts::TAU * fc;
+        assert!((last[1] - 2.0).abs() < 1e-6, "{last:?}");
+        // The held input is a staircase: its steps leave a ripple of a few um/s^2 at the
+        // sampling rate.
+        assert!(last[2].abs() < 0.01, "{last:?}");
+        // Each input is held over the interval that ends at its own sample, half a sample
+        // ahead of its centre: the delay is half a sample less.
+        let delay = 2.0 / w - 0.5 * dt;
+        assert!((last[0] - 2.0 * (t_end - delay)).abs() < 2e-3, "{last:?}");
+    }
+
+    #[test]
+    fn the_motion_velocity_is_the_derivative_of_its_position() {
+        // Driven by a noisy input, the state is still one motion: the change of x over a
+        // sample is the integral of xd, to second order.
+        let dt = 0.01;
+        let mut f = MotionFilter::new(2.0, dt);
+        let noise = standard_normals::<500>(3);
+        let states: Vec<[f64; 3]> = noise
+            .iter()
+            .enumerate()
+            .map(|(i, n)| f.push(5.0 + (i as f64 * 0.02).sin() + 0.1 * n))
+            .collect();
+        for w in states.windows(2).skip(10) {
+            let dx = w[1][0] - w[0][0];
+            let trapezoid = 0.5 * (w[0][1] + w[1][1]) * dt;
+            // The trapezoid's error is dt^3 / 12 times the third derivative.
+            assert!((dx - trapezoid).abs() < 1e-4, "{dx} vs {trapezoid}");
+            let dv = w[1][1] - w[0][1];
+            let trapezoid_v = 0.5 * (w[0][2] + w[1][2]) * dt;
+            assert!((dv - trapezoid_v).abs() < 5e-3, "{dv} vs {trapezoid_v}");
+        }
+    }
+
+    #[test]
+    fn a_twin_follows_the_logged_motion_with_the_law_s_force() {
+        // A noise-free ramp-hold of the simulator: the twin (no noise of its own) must move
+        // as the log did and carry the law's force plus the dynamics along its own motion.
+        use crate::estimate::sim::{simulate, Dynamics, Profile, SimSettings};
+        let law = ExpLaw {
+            mu_n: 1.1,
+            k2_per_mm: 0.24,
+            f0_n: 2.0,
+        };
+        let dynamics = Dynamics {
+            m_n_s2_per_mm: 0.25,
+            d0_n: 0.0,
+            d1_n_s_per_mm: 1.5,
+            d2_n_s3_per_mm3: 0.0,
+        };
+        let mut settings = SimSettings {
+            profile: Profile::RampHold,
+            duration_s: 60.0,
+            dynamics,
+            ..SimSettings::default()
+        };
+        settings.noise.force_variance_n2 = 0.0;
+        settings.noise.position_variance_mm2 = 0.0;
+        let (log, _) = simulate(law, 15.0, 500.0, &settings).unwrap();
+        let truth = TwinTruth {
+            m_n_s2_per_mm: 0.25,
+            d0_n: 0.0,
+            d1_n_s_per_mm: 1.5,
+            d2_n_s3_per_mm3: 0.0,
+            law,
+        };
+        let mut twin = TwinSource::new(truth, 241, 0.01, 0.0, 0.0, 1);
+        let mut out = Vec::new();
+        for i in 0..log.len() {
+            let s = Sample {
+                t_s: log.t_s[i],
+                force_n: log.force_n[i],
+                position_mm: log.position_mm[i],
+            };
+            twin.push(i, &s);
+            out.extend(twin.out.drain(..));
+        }
+        twin.finish();
+        out.extend(twin.out.drain(..));
+        assert_eq!(out.len(), log.len());
+        let (mut worst_x, mut worst_f) = (0.0_f64, 0.0_f64);
+        // Away from the ends (the first half window takes the first smoothed value), the
+        // twin lags the log by the Butterworth's delay, 2 / w less half a sample.
+        let lag = (2.0 / (std::f64::consts::TAU * TWIN_MOTION_CUTOFF_WINDOWS / 2.41) / 0.01 - 0.5)
+            .round() as usize;
+        for (k, (i, s)) in out.iter().enumerate().skip(300).take(log.len() - 600) {
+            assert_eq!(*i, k);
+            assert_eq!(s.t_s, log.t_s[k]);
+            worst_x = worst_x.max((s.position_mm - log.position_mm[k - lag]).abs());
+            worst_f = worst_f.max((s.force_n - log.force_n[k - lag]).abs());
+        }
+        // The ramps move up to 5 mm in 4 s: the twin is within 0.05 mm of the log's motion,
+        // and its force within 0.2 N of the log's (of 3 to 40 N; the force noise of a rig is
+        // about 0.13 N). The smoothing rounds the joints of ramp and hold a little.
+        assert!(worst_x < 0.05, "{worst_x} mm");
+        assert!(worst_f < 0.2, "{worst_f} N");
+    }
+
+    #[test]
+    fn the_bias_is_the_mean_error_and_the_std_grows_with_the_twins_scatter() {
+        let b = TwinBias::new(
+            4,
+            300.0,
+            1.0,
+            vec![
+                (
+                    "k2_per_mm",
+                    0.30,
+                    0.001,
+                    vec![-0.003, -0.005, -0.004, -0.004],
+                ),
+                ("m_n_s2_per_mm", 0.1, 0.01, vec![0.001]),
+            ],
+        );
+        assert_eq!(b.states.len(), 1, "one error is not enough for a bias");
+        assert_eq!(b.diverged, 3);
+        let k = &b.states[0];
+        assert!((k.bias + 0.004).abs() < 1e-12);
+        assert!((k.corrected - 0.304).abs() < 1e-12);
+        // Scatter sqrt(2e-6 / 3) = 8.2e-4 < 1e-3: the filter's std stands, plus 1/4 of it.
+        assert!((k.corrected_std - 0.001 * 1.25f64.sqrt()).abs() < 1e-12);
+    }
+}
