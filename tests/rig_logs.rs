@@ -288,3 +288,63 @@ fn validate_says_what_part_of_the_stroke_the_log_covers() {
     let html = std::fs::read_to_string(d.join("validation.html")).unwrap();
     assert!(html.contains("Coverage: x =") && html.contains("Measured force against deflection"));
 }
+
+/// `estimate --twins N` reports the twins in the JSON: the bias taken out is the mean of their
+/// errors, the reported k2 the filter's own less that bias, and the filter's own value is what
+/// `--twins 0` reports. More than 64 twins (unbounded work) is refused, naming the option.
+#[test]
+fn estimate_reports_its_twins_and_refuses_too_many() {
+    let dir = tempfile::tempdir().unwrap();
+    simulate_paper(dir.path(), "3");
+    let json = |twins: &str| {
+        let out = camspring(
+            dir.path(),
+            &[
+                "estimate",
+                "calib.csv",
+                "-o",
+                "est.csv",
+                "--json",
+                "--twins",
+                twins,
+            ],
+        );
+        assert_eq!(
+            out.status.code(),
+            Some(0),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()
+    };
+    let with = json("4");
+    let t = &with["twins"];
+    assert_eq!(t["twins"], 4);
+    let k2 = &t["states"][0];
+    assert_eq!(k2["state"], "k2_per_mm");
+    let errors: Vec<f64> = k2["errors"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e.as_f64().unwrap())
+        .collect();
+    assert_eq!(errors.len(), 4);
+    let bias = errors.iter().sum::<f64>() / 4.0;
+    let f = |v: &serde_json::Value| v.as_f64().unwrap();
+    assert!((f(&k2["bias"]) - bias).abs() < 1e-15);
+    assert!((f(&k2["corrected"]) - (f(&k2["filter"]) - bias)).abs() < 1e-15);
+    assert_eq!(f(&with["final"]["k2_per_mm"]), f(&k2["corrected"]));
+    let without = json("0");
+    assert!(without["twins"].is_null());
+    assert_eq!(f(&without["final"]["k2_per_mm"]), f(&k2["filter"]));
+    let out = camspring(
+        dir.path(),
+        &["estimate", "calib.csv", "-o", "est.csv", "--twins", "65"],
+    );
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("--twins") && stderr.contains("65"),
+        "{stderr}"
+    );
+}

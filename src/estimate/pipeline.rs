@@ -776,6 +776,7 @@ where
                 samples: survey
                     .samples
                     .min((opts.identify_span_s / dt).ceil().clamp(3.0, 1e15) as usize),
+                log_s: survey.samples as f64 * dt,
                 dt,
                 force_rate: opts.force_rate,
                 settings,
@@ -811,6 +812,8 @@ struct TwinSetup<'a> {
     twins: usize,
     /// Samples each twin copies (the identification span, at most the log).
     samples: usize,
+    /// The whole log's length (s).
+    log_s: f64,
     dt: f64,
     force_rate: ekf::ForceRate,
     settings: EkfSettings,
@@ -828,18 +831,19 @@ struct TwinSetup<'a> {
 /// force noise on the quasi-static relation between force and deflection, which depends on
 /// the motion's slow content, and a twin's smoothed motion reproduces that. M's (and d2's)
 /// depends on the accelerations' fine detail, which it does not: on the acceptance matrix the
-/// twins' M bias moved with the twin's smoothing by up to 3 % and put M, right before, up to
-/// 4 of its standard deviations off.
+/// twins' M bias moved with the twin's smoothing by up to 3 %, and put M on the heavy rows up
+/// to 4 (smoothing at 1.5 cycles per window) or 23 (at 8) of its standard deviations off,
+/// where it had been within 2.
 pub const TWIN_CORRECTED: [usize; 1] = [ekf::idx::K2];
 
 /// Seeds of the twins' noise and of their starts.
 const TWIN_NOISE_SEED: u64 = 0x7719_0000;
 const TWIN_START_SEED: u64 = 0x5717_0000;
-const TWIN_TRUTH_SEED: u64 = 0x7207_0000;
 
 /// Runs the filter on `setup.twins` twins of the log ([`twin`]), all in one more pass over
 /// its first `setup.samples` samples (in chunks, the twins in parallel), and compares each
-/// twin's final M, k2 and d2 (those the log's run estimates) with the twin's truth.
+/// twin's final constants of [`TWIN_CORRECTED`] (those the log's run estimates) with the
+/// twin's truth: identification's transmission, with held states at their held values.
 fn run_twins<I>(
     open: &mut impl FnMut() -> Result<I, LogError>,
     setup: &TwinSetup<'_>,
@@ -876,20 +880,6 @@ where
     }
     let mut twins: Vec<Twin> = (0..setup.twins as u64)
         .map(|j| {
-            // A state the filter holds at identification's value is, in truth, anywhere within
-            // identification's uncertainty: the twin's truth is drawn there, and the twin's
-            // filter holds it at the log's value, as the log's filter does.
-            let [g, h] = twin::standard_normals::<2>(TWIN_TRUTH_SEED + j);
-            let mut truth = truth;
-            if init.m_n_s2_per_mm.1 == 0.0 {
-                truth.m_n_s2_per_mm =
-                    (truth.m_n_s2_per_mm + g * std_of(Param::M)).max(setup.settings.m_floor);
-            }
-            if init.d2_n_s3_per_mm3.1 == 0.0 {
-                if let Some(v) = id.get(Param::D2).value {
-                    truth.d2_n_s3_per_mm3 = v + h * std_of(Param::D2);
-                }
-            }
             // The twin's filter starts where the log's would if identification had erred by
             // a draw of its own standard deviations.
             let [a, b, c, d, e] = twin::standard_normals::<5>(TWIN_START_SEED + j);
@@ -1003,6 +993,7 @@ where
     Ok(TwinBias::new(
         setup.twins,
         setup.samples as f64 * setup.dt,
+        setup.log_s,
         setup.window as f64 * setup.dt,
         constants,
     ))

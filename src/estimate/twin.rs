@@ -284,14 +284,22 @@ pub struct TwinBias {
 impl TwinBias {
     /// Combines the twins' errors on each constant with the filter's value on the log.
     /// `constants` holds (name, filter value, filter std, errors); constants with fewer than
-    /// two errors are left out.
+    /// two errors are left out. The twins copy `span_s` of a log `log_s` long: where the log is
+    /// longer, the twins' scatter is that of a shorter run, and is scaled by
+    /// sqrt(span / log) before it is compared with the filter's standard deviation.
     pub fn new(
         twins: usize,
         span_s: f64,
+        log_s: f64,
         smoothing_window_s: f64,
         constants: Vec<(&'static str, f64, f64, Vec<f64>)>,
     ) -> TwinBias {
         let mut diverged = 0;
+        let share = if log_s > span_s && span_s > 0.0 {
+            span_s / log_s
+        } else {
+            1.0
+        };
         let states = constants
             .into_iter()
             .filter_map(|(state, filter, filter_std, errors)| {
@@ -304,7 +312,11 @@ impl TwinBias {
                 let scatter = (errors.iter().map(|e| (e - bias).powi(2)).sum::<f64>()
                     / (n - 1) as f64)
                     .sqrt();
-                let spread = scatter.max(filter_std);
+                // The estimate's own spread on the log's length, and the bias's uncertainty:
+                // the twins' errors scatter at least as the filter's would over their span.
+                let spread = (scatter * share.sqrt()).max(filter_std);
+                let twin_spread = scatter.max(filter_std / share.sqrt());
+                let bias_variance = twin_spread * twin_spread / n as f64;
                 Some(TwinState {
                     state,
                     filter,
@@ -312,7 +324,7 @@ impl TwinBias {
                     bias,
                     scatter,
                     corrected: filter - bias,
-                    corrected_std: (spread * spread * (1.0 + 1.0 / n as f64)).sqrt(),
+                    corrected_std: (spread * spread + bias_variance).sqrt(),
                     errors,
                 })
             })
@@ -447,6 +459,7 @@ mod tests {
         let b = TwinBias::new(
             4,
             300.0,
+            300.0,
             1.0,
             vec![
                 (
@@ -465,5 +478,30 @@ mod tests {
         assert!((k.corrected - 0.304).abs() < 1e-12);
         // Scatter sqrt(2e-6 / 3) = 8.2e-4 < 1e-3: the filter's std stands, plus 1/4 of it.
         assert!((k.corrected_std - 0.001 * 1.25f64.sqrt()).abs() < 1e-12);
+        // Twins of the first hour of a day-long log: their scatter is an hour's, sqrt(24)
+        // times a day's (1.7e-4, above the filter's own 1e-4). The bias's variance is the
+        // larger of the scatter and the filter's std at an hour (4.9e-4), squared, over 4.
+        let day = TwinBias::new(
+            4,
+            3600.0,
+            86_400.0,
+            1.0,
+            vec![(
+                "k2_per_mm",
+                0.30,
+                1e-4,
+                vec![-0.003, -0.005, -0.004, -0.004],
+            )],
+        );
+        let k = &day.states[0];
+        let scatter = (2e-6f64 / 3.0).sqrt();
+        let twin_spread = scatter.max(1e-4 * 24f64.sqrt());
+        let spread = (scatter / 24f64.sqrt()).max(1e-4);
+        let expected = (spread * spread + twin_spread * twin_spread / 4.0).sqrt();
+        assert!(
+            (k.corrected_std - expected).abs() < 1e-15,
+            "{}",
+            k.corrected_std
+        );
     }
 }

@@ -396,9 +396,9 @@ pub fn format_consistency(est: &EstimateRun) -> String {
         for c in &t.states {
             let _ = writeln!(
                 s,
-                "  {} corrected for the filter's bias, {:+.3} % of it, measured on {} twins of the \
-                 log (simulated with identification's transmission, {:.0} s each): {:.6} +- {:.6} \
-                 before, {:.6} +- {:.6} after",
+                "  {}: the filter's bias, {:+.3} %, measured on {} twins of the log (simulated \
+                 with identification's transmission, {:.0} s each) and taken out:\n    {:.6} +- \
+                 {:.6} before, {:.6} +- {:.6} after",
                 c.state,
                 100.0 * c.bias / c.corrected.abs().max(1e-300),
                 c.errors.len(),
