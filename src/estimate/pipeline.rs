@@ -1023,7 +1023,7 @@ fn apply_twin_bias(run: &mut EkfRun, bias: &TwinBias) {
 }
 
 /// Identification's relative standard deviation of M up to which the filter's own standard
-/// deviation of M stands ([`widen_to_identification`]).
+/// deviation of M stands (`widen_to_identification`).
 pub const M_RESOLVED: f64 = 0.1;
 
 /// Brings the filter's standard deviations of M (where identification does not resolve it
@@ -1161,7 +1161,7 @@ impl StiffnessPath {
     }
 }
 
-/// The mean square of the stiffness path's z ([`StiffnessPath`]) beyond which the filter is
+/// The mean square of the stiffness path's z (`StiffnessPath`) beyond which the filter is
 /// not consistent.
 pub const STIFFNESS_PATH_MEAN_SQUARE_Z: f64 = 4.0;
 
