@@ -876,7 +876,6 @@ where
         .collect();
     let std_of = |p: Param| id.get(p).std.unwrap_or(0.0);
     struct Twin {
-        truth: TwinTruth,
         source: TwinSource,
         coulomb: CoulombStage,
         filter: Option<ekf::Filter>,
@@ -910,7 +909,6 @@ where
                 ekf::OFFSET_MEMORY_S,
             )?;
             Ok(Twin {
-                truth,
                 source: TwinSource::new(
                     truth,
                     setup.window,
@@ -961,7 +959,7 @@ where
             }
         });
     }
-    let finals: Vec<Option<(ekf::State, TwinTruth)>> = twins
+    let finals: Vec<Option<ekf::State>> = twins
         .into_iter()
         .map(|mut twin| {
             twin.source.finish();
@@ -972,11 +970,11 @@ where
             feed(&mut twin);
             twin.filter
                 .and_then(|f| f.finish().ok())
-                .map(|r| (r.last.z, twin.truth))
-                .filter(|(z, _)| z.iter().all(|v| v.is_finite()))
+                .map(|r| r.last.z)
+                .filter(|z| z.iter().all(|v| v.is_finite()))
         })
         .collect();
-    let truth_of = |k: usize, truth: &TwinTruth| match k {
+    let truth_of = |k: usize| match k {
         ekf::idx::M => truth.m_n_s2_per_mm,
         ekf::idx::K2 => truth.law.k2_per_mm,
         _ => truth.d2_n_s3_per_mm3,
@@ -988,7 +986,7 @@ where
             let errors = finals
                 .iter()
                 .flatten()
-                .map(|(z, truth)| z[k] - truth_of(k, truth))
+                .map(|z| z[k] - truth_of(k))
                 .collect();
             (ekf::STATE_NAMES[k], run.last.z[k], sd[k], errors)
         })
