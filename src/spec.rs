@@ -135,6 +135,18 @@ struct RawSpec {
     output: Option<RawOutput>,
     tolerances: Option<RawTolerances>,
     drawing: Option<RawDrawing>,
+    revision: Option<Spanned<String>>,
+    revision_note: Option<Spanned<String>>,
+    assembly: Option<RawAssembly>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawAssembly {
+    shim: Q,
+    spring_rate: Q,
+    spring_part: Option<Spanned<String>>,
+    friction: Q,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -726,8 +738,36 @@ fn read(raw: &RawSpec, r: &mut Reader<'_>) -> Result<Spec, SpecError> {
         Some(c) => Some(read_catalogue(r, c)?),
         None => None,
     };
-    let drawing = read_drawing(raw, r)?;
+    let mut drawing = read_drawing(raw, r)?;
+    let revision = raw
+        .revision
+        .as_ref()
+        .map(|t| t.get_ref().trim().to_string());
+    // The title block shows the spec's revision unless the drawing names its own.
+    if let (Some(rev), None) = (
+        &revision,
+        raw.drawing.as_ref().and_then(|d| d.revision.as_ref()),
+    ) {
+        drawing.revision = rev.clone();
+    }
+    let default_assembly = RawAssembly::default();
+    let a = raw.assembly.as_ref().unwrap_or(&default_assembly);
+    let assembly = crate::model::Assembly {
+        shim_mm: r.or("assembly.shim", &a.shim, D::Length, 0.0)?,
+        spring_rate_n_per_mm: r.optional("assembly.spring_rate", &a.spring_rate, D::Stiffness)?,
+        spring_part: a
+            .spring_part
+            .as_ref()
+            .map(|t| t.get_ref().trim().to_string()),
+        friction: r.optional("assembly.friction", &a.friction, D::Dimensionless)?,
+    };
     Ok(Spec {
+        revision,
+        revision_note: raw
+            .revision_note
+            .as_ref()
+            .map(|t| t.get_ref().trim().to_string()),
+        assembly,
         name,
         law,
         follower,

@@ -253,6 +253,36 @@ pub struct Spec {
     pub drawing: DrawingSpec,
     /// Springs to choose from (`follower.spring_catalogue`), for `camspring springs`.
     pub spring_catalogue: Option<SpringCatalogue>,
+    /// The design's revision (`revision`, e.g. "B" from `camspring revise`).
+    pub revision: Option<String>,
+    /// What the revision changed and why (`revision_note`).
+    pub revision_note: Option<String>,
+    /// The parts the cam is assembled with, where they differ from those it was cut for.
+    pub assembly: Assembly,
+}
+
+/// The parts a cam is assembled with, where they differ from the `[follower]` it was cut for
+/// (`[assembly]`, written by `camspring revise` for a shim or a catalogue spring). The cam
+/// itself is always synthesised for `[follower]`.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct Assembly {
+    /// The preload as assembled minus `follower.preload`, as follower travel (mm; negative is
+    /// less compression): the build's measured preload error plus the shims a revision adds.
+    pub shim_mm: f64,
+    /// Rate of each physical spring fitted, when another than `follower.spring_rate`.
+    pub spring_rate_n_per_mm: Option<f64>,
+    /// The fitted spring's catalogue part, if any.
+    pub spring_part: Option<String>,
+    /// The contact friction coefficient as measured on the build, when another than the
+    /// follower's (it changes what the build's force curves look like, not the cam).
+    pub friction: Option<f64>,
+}
+
+impl Assembly {
+    /// Whether anything differs from the follower the cam was cut for.
+    pub fn is_changed(&self) -> bool {
+        self.shim_mm != 0.0 || self.spring_rate_n_per_mm.is_some() || self.friction.is_some()
+    }
 }
 
 /// Builds a [`Spec`] in code: the law and the followers are required, every other section
@@ -416,6 +446,9 @@ impl Spec {
                 tolerances: TolerancesSpec::default(),
                 drawing: DrawingSpec::default(),
                 spring_catalogue: None,
+                revision: None,
+                revision_note: None,
+                assembly: Assembly::default(),
             },
             checks_given: false,
         }
@@ -456,8 +489,39 @@ impl Spec {
         validate_checks(&self.checks)?;
         validate_output(&self.output)?;
         validate_tolerances(&self.tolerances)?;
-        validate_drawing(&self.drawing)
+        validate_drawing(&self.drawing)?;
+        validate_assembly(&self.assembly, &self.follower)
     }
+}
+
+fn validate_assembly(a: &Assembly, f: &Follower) -> Result<(), SpecError> {
+    if !a.shim_mm.is_finite() || f.preload_mm + a.shim_mm < 0.0 {
+        return Err(invalid(
+            "assembly.shim",
+            found_value(a.shim_mm, "mm"),
+            format!(
+                "a length of at least -{} mm (follower.preload: a spring cannot be less than unloaded)",
+                f.preload_mm
+            ),
+        ));
+    }
+    if let Some(rate) = a.spring_rate_n_per_mm {
+        check(
+            "assembly.spring_rate",
+            rate,
+            Range::Open(0.0, MAX_SPRING_RATE_N_PER_MM),
+            "N/mm",
+        )?;
+    }
+    if let Some(mu) = a.friction {
+        check(
+            "assembly.friction",
+            mu,
+            Range::HalfOpen(0.0, MAX_FRICTION),
+            "",
+        )?;
+    }
+    Ok(())
 }
 
 fn stroke() -> Range {
