@@ -89,6 +89,86 @@ pub fn build_force(
     super::forces::rod_force(q, theta, build.friction.atan())
 }
 
+/// Follower lift Y and pressure angle theta at any deflection: a cubic Hermite through the
+/// pitch samples with their slopes tan(theta); beyond the ends, the end tangent.
+pub fn pitch_at(pitch: &PitchCurve, x_mm: f64) -> (f64, f64) {
+    let s = &pitch.samples;
+    let n = s.len();
+    if n == 0 {
+        return (0.0, 0.0);
+    }
+    let (first, last) = (&s[0], &s[n - 1]);
+    if n == 1 || x_mm <= first.x_mm {
+        return (
+            first.y_mm + first.theta_rad.tan() * (x_mm - first.x_mm),
+            first.theta_rad,
+        );
+    }
+    if x_mm >= last.x_mm {
+        return (
+            last.y_mm + last.theta_rad.tan() * (x_mm - last.x_mm),
+            last.theta_rad,
+        );
+    }
+    let i = s.partition_point(|p| p.x_mm <= x_mm).clamp(1, n - 1) - 1;
+    let (a, b) = (&s[i], &s[i + 1]);
+    let h = b.x_mm - a.x_mm;
+    if h <= 0.0 {
+        return (a.y_mm, a.theta_rad);
+    }
+    let t = (x_mm - a.x_mm) / h;
+    let (m0, m1) = (a.theta_rad.tan(), b.theta_rad.tan());
+    let (t2, t3) = (t * t, t * t * t);
+    let y = a.y_mm * (2.0 * t3 - 3.0 * t2 + 1.0)
+        + h * m0 * (t3 - 2.0 * t2 + t)
+        + b.y_mm * (-2.0 * t3 + 3.0 * t2)
+        + h * m1 * (t3 - t2);
+    let slope = (a.y_mm * (6.0 * t2 - 6.0 * t) + b.y_mm * (6.0 * t - 6.0 * t2)) / h
+        + m0 * (3.0 * t2 - 4.0 * t + 1.0)
+        + m1 * (3.0 * t2 - 2.0 * t);
+    (y, slope.atan())
+}
+
+/// Loading and unloading rod force of a build at any deflection `x_mm` of the made cam
+/// ([`pitch_at`]; loading None where the followers jam).
+pub fn build_force_at(
+    pitch: &PitchCurve,
+    follower: &Follower,
+    build: &Build,
+    x_mm: f64,
+) -> (Option<f64>, f64) {
+    let (y, theta) = pitch_at(pitch, x_mm);
+    let cos = theta.cos().max(1e-9);
+    let y = y + (build.roller_mm + build.profile_mm) / cos;
+    let q = follower.k_eff_n_per_mm()
+        * (1.0 + build.rate)
+        * (y + follower.preload_mm + build.preload_mm).max(0.0);
+    super::forces::rod_force(q, theta, build.friction.atan())
+}
+
+/// The loading and unloading force curves of one build as (x, F) points at the pitch samples,
+/// or the deflection where its followers jam on loading.
+#[allow(clippy::type_complexity)]
+pub fn build_curves(
+    pitch: &PitchCurve,
+    follower: &Follower,
+    build: &Build,
+) -> Result<(Vec<(f64, f64)>, Vec<(f64, f64)>), f64> {
+    let (mut loading, mut unloading) = (Vec::new(), Vec::new());
+    for (i, s) in pitch.samples.iter().enumerate() {
+        if loading
+            .last()
+            .is_some_and(|&(x, _): &(f64, f64)| s.x_mm <= x + 1e-9)
+        {
+            continue;
+        }
+        let (l, u) = build_force(pitch, follower, build, i);
+        loading.push((s.x_mm, l.ok_or(s.x_mm)?));
+        unloading.push((s.x_mm, u));
+    }
+    Ok((loading, unloading))
+}
+
 /// A tolerance's share of the spread at the end of the stroke.
 #[derive(Debug, Clone, Serialize)]
 pub struct Sensitivity {

@@ -239,6 +239,25 @@ pub struct Simulator {
     rng: StdRng,
     force_noise: Normal<f64>,
     position_noise: Normal<f64>,
+    /// The unloading curve of a built cam with contact friction ([`BuiltSpring`]).
+    unloading: Option<ForceLaw>,
+    /// Added to every logged position: an encoder zero off by this much.
+    position_offset_mm: f64,
+    /// The last direction of motion (+1 loading, -1 unloading): at rest the contact friction
+    /// holds the force of the stroke that came to rest.
+    direction: f64,
+}
+
+/// A built cam spring: the rod force along the loading stroke and along the unloading stroke
+/// (they differ by the contact friction's hysteresis), and the encoder zero of the rig.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BuiltSpring {
+    /// Rod force while the deflection grows.
+    pub loading: ForceLaw,
+    /// Rod force while it shrinks.
+    pub unloading: ForceLaw,
+    /// The logged position is the true one plus this (mm).
+    pub position_offset_mm: f64,
 }
 
 impl Simulator {
@@ -306,7 +325,30 @@ impl Simulator {
             rng,
             force_noise,
             position_noise,
+            unloading: None,
+            position_offset_mm: 0.0,
+            direction: 1.0,
         })
+    }
+
+    /// A run of a built spring: the loading curve while the deflection grows, the unloading
+    /// curve while it shrinks (at rest, the last stroke's), and the rig's encoder zero.
+    pub fn built(
+        spring: &BuiltSpring,
+        xmax_mm: f64,
+        fmax_n: f64,
+        s: &SimSettings,
+    ) -> Result<Simulator, SimError> {
+        if !spring.position_offset_mm.is_finite() {
+            return Err(SimError::Settings(format!(
+                "position offset {} mm: expected a finite length",
+                spring.position_offset_mm
+            )));
+        }
+        let mut sim = Simulator::new(spring.loading.clone(), xmax_mm, fmax_n, s)?;
+        sim.unloading = Some(spring.unloading.clone());
+        sim.position_offset_mm = spring.position_offset_mm;
+        Ok(sim)
     }
 
     /// Samples in the run (duration times rate).
@@ -359,11 +401,18 @@ impl Simulator {
         } else {
             0.0
         };
+        if sgn != 0.0 {
+            self.direction = sgn;
+        }
+        let spring = match &self.unloading {
+            Some(unloading) if self.direction < 0.0 => unloading,
+            _ => &self.law,
+        };
         let f = d.m_n_s2_per_mm * xdd
             + d.d1_n_s_per_mm * xd
             + d.d2_n_s3_per_mm3 * xd.powi(3)
             + d.d0_n * sgn
-            + self.law.force_n(x);
+            + spring.force_n(x);
         if !(0.0..=self.limit_n).contains(&f) {
             return Err(SimError::ForceOutOfRange {
                 profile: s.profile,
@@ -378,12 +427,12 @@ impl Simulator {
             logged: super::log::Sample {
                 t_s: t,
                 force_n: f + force_noise,
-                position_mm: x + position_noise,
+                position_mm: x + self.position_offset_mm + position_noise,
             },
             position_mm: x,
             velocity_mm_per_s: xd,
             force_n: f,
-            sigma_n_per_mm: self.law.stiffness_n_per_mm(x),
+            sigma_n_per_mm: spring.stiffness_n_per_mm(x),
             d_n_s_per_mm: d.d1_n_s_per_mm + 3.0 * d.d2_n_s3_per_mm3 * xd * xd,
         })
     }
@@ -396,6 +445,24 @@ pub fn simulate(
     fmax_n: f64,
     s: &SimSettings,
 ) -> Result<(CalibrationLog, Truth), SimError> {
+    check_samples(s)?;
+    collect(Simulator::new(law, xmax_mm, fmax_n, s)?, s)
+}
+
+/// Simulates a calibration run of a built spring ([`BuiltSpring`]): loading and unloading
+/// curves apart by the contact friction, and an encoder zero.
+pub fn simulate_built(
+    spring: &BuiltSpring,
+    xmax_mm: f64,
+    fmax_n: f64,
+    s: &SimSettings,
+) -> Result<(CalibrationLog, Truth), SimError> {
+    check_samples(s)?;
+    collect(Simulator::built(spring, xmax_mm, fmax_n, s)?, s)
+}
+
+/// Refuses a run of more than [`MAX_SAMPLES`] samples.
+fn check_samples(s: &SimSettings) -> Result<(), SimError> {
     let samples = s.duration_s * s.rate_hz;
     if samples.is_nan() || samples > MAX_SAMPLES {
         return Err(SimError::Settings(format!(
@@ -406,7 +473,11 @@ pub fn simulate(
             s.duration_s * s.rate_hz
         )));
     }
-    let mut sim = Simulator::new(law, xmax_mm, fmax_n, s)?;
+    Ok(())
+}
+
+/// Runs a simulator to its end, keeping the log and the truth.
+fn collect(mut sim: Simulator, s: &SimSettings) -> Result<(CalibrationLog, Truth), SimError> {
     let n = sim.samples();
     let mut log = CalibrationLog {
         t_s: Vec::with_capacity(n),
