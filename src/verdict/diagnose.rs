@@ -1,0 +1,1017 @@
+//! `camspring diagnose`: what the build got wrong, from its calibration log.
+//!
+//! The measured rod force is explained with the design's own forward model (docs/THEORY.md,
+//! "Friction" and "The force band"): the made pitch curve, with the build's spring rate, preload,
+//! contact friction and the rig's encoder zero free, plus the transmission's inertia, damping and
+//! Coulomb friction outside the cam (eq. 9):
+//!
+//! ```text
+//! F = (1 + rate) k_eff (Y(x - zero) + Yp + dYp) tan(theta(x - zero) +- atan(friction))
+//!     + m xdd + d0 sgn(xd) + d1 xd + d2 xd^3
+//! ```
+//!
+//! with + on loading and - on unloading (at rest, the stroke that came to rest). Position,
+//! velocity and acceleration come from the Savitzky-Golay differentiator; samples where the
+//! motion reverses inside the velocity's noise are left out, since their stroke is unknown.
+//! The eight parameters are fitted by Levenberg-Marquardt, each sample weighted by its force
+//! noise plus the smoothed position noise times the local stiffness. Their covariance is a
+//! sandwich over blocks of samples, which stays honest when the residuals are coloured by the
+//! smoothing or the weights are off. A build parameter whose standard deviation exceeds a third
+//! of its [`RESOLUTION`] is named as not resolved by this log.
+
+use nalgebra::{DMatrix, DVector};
+use serde::Serialize;
+
+use crate::cam::tolerance::{build_curves, build_force_at, Build};
+use crate::design::Design;
+use crate::estimate::identify::SensorNoise;
+use crate::estimate::log::CalibrationLog;
+use crate::estimate::pipeline::PositionOffset;
+use crate::estimate::sg;
+use crate::estimate::sim::BuiltSpring;
+use crate::model::{Follower, ForceLaw, TableLaw};
+use rayon::prelude::*;
+
+/// How a build departs from its design: what `simulate` can build and `diagnose` recovers.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct AsBuilt {
+    /// The springs' rate over the designed rate (1: as designed).
+    pub spring_rate_scale: f64,
+    /// Preload as assembled minus the designed preload, as follower travel (mm).
+    pub preload_offset_mm: f64,
+    /// The effective contact friction coefficient of the build.
+    pub friction: f64,
+    /// The rig's encoder reads the deflection plus this (mm).
+    pub zero_offset_mm: f64,
+}
+
+impl AsBuilt {
+    /// The build exactly as designed: the design's friction, no offsets.
+    pub fn nominal(follower: &Follower) -> AsBuilt {
+        AsBuilt {
+            spring_rate_scale: 1.0,
+            preload_offset_mm: 0.0,
+            friction: follower.friction_coefficient(),
+            zero_offset_mm: 0.0,
+        }
+    }
+
+    /// The build as the spec assembles it: `[assembly]`'s spring and shim on the cam cut for
+    /// `[follower]`.
+    pub fn assembled(spec: &crate::model::Spec) -> AsBuilt {
+        let f = &spec.follower;
+        AsBuilt {
+            spring_rate_scale: spec
+                .assembly
+                .spring_rate_n_per_mm
+                .map_or(1.0, |k| k / f.spring_rate_n_per_mm),
+            preload_offset_mm: spec.assembly.shim_mm,
+            friction: spec
+                .assembly
+                .friction
+                .unwrap_or_else(|| f.friction_coefficient()),
+            ..AsBuilt::nominal(f)
+        }
+    }
+
+    /// The build's deviations in the force model's terms.
+    pub fn build(&self) -> Build {
+        Build {
+            rate: self.spring_rate_scale - 1.0,
+            preload_mm: self.preload_offset_mm,
+            roller_mm: 0.0,
+            profile_mm: 0.0,
+            friction: self.friction,
+        }
+    }
+
+    /// Refuses values no build can have, naming the option.
+    pub fn check(&self) -> Result<(), DiagnoseError> {
+        let bad = |what: &str, value: f64, expected: &str| {
+            Err(DiagnoseError::Build(format!(
+                "{what} {value}: expected {expected}"
+            )))
+        };
+        if !(self.spring_rate_scale.is_finite() && (0.05..=20.0).contains(&self.spring_rate_scale))
+        {
+            return bad(
+                "--built-rate-scale",
+                self.spring_rate_scale,
+                "a factor from 0.05 to 20 on the designed spring rate",
+            );
+        }
+        if !(self.preload_offset_mm.is_finite() && self.preload_offset_mm.abs() <= 100.0) {
+            return bad(
+                "--built-preload-offset",
+                self.preload_offset_mm,
+                "a length within +-100 mm",
+            );
+        }
+        if !(self.friction.is_finite()
+            && (0.0..crate::model::MAX_FRICTION).contains(&self.friction))
+        {
+            return bad(
+                "--built-friction",
+                self.friction,
+                "a contact friction coefficient from 0 to below 1",
+            );
+        }
+        if !(self.zero_offset_mm.is_finite() && self.zero_offset_mm.abs() <= 1000.0) {
+            return bad(
+                "--built-zero-offset",
+                self.zero_offset_mm,
+                "a length within +-1000 mm",
+            );
+        }
+        Ok(())
+    }
+}
+
+/// The spring a design becomes when built as `as_built`: its loading and unloading curves
+/// through the forward model, for the simulator.
+pub fn built_spring(design: &Design, as_built: &AsBuilt) -> Result<BuiltSpring, DiagnoseError> {
+    as_built.check()?;
+    let follower = &design.spec.follower;
+    let (loading, unloading) = build_curves(&design.pitch_curve, follower, &as_built.build())
+        .map_err(|x| {
+            DiagnoseError::Build(format!(
+                "built with contact friction {} the followers jam on loading at x = {x:.3} mm \
+                 (pressure angle plus friction angle reach 90 deg)",
+                as_built.friction
+            ))
+        })?;
+    Ok(BuiltSpring {
+        loading: ForceLaw::Table(TableLaw::new(&loading)),
+        unloading: ForceLaw::Table(TableLaw::new(&unloading)),
+        position_offset_mm: as_built.zero_offset_mm,
+    })
+}
+
+/// Why a log could not be diagnosed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DiagnoseError {
+    /// Produced by [`diagnose`] for a log too short or too still to fit.
+    #[error("{0}")]
+    Log(String),
+    /// Produced by [`AsBuilt::check`] and [`built_spring`] for a build no part can have.
+    #[error("build: {0}")]
+    Build(String),
+}
+
+/// One build parameter, where a third of its standard deviation must fall for it to be resolved.
+pub const RESOLUTION: [(BuildParam, f64); 4] = [
+    (BuildParam::SpringRate, 0.01),
+    (BuildParam::Preload, 0.05),
+    (BuildParam::Friction, 0.005),
+    (BuildParam::Zero, 0.05),
+];
+
+/// The build parameters `diagnose` fits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BuildParam {
+    /// Relative spring-rate error.
+    SpringRate,
+    /// Preload offset (mm).
+    Preload,
+    /// Contact friction coefficient.
+    Friction,
+    /// Encoder zero (mm).
+    Zero,
+}
+
+impl BuildParam {
+    /// The name with its unit, as in the JSON.
+    pub fn key(self) -> &'static str {
+        match self {
+            BuildParam::SpringRate => "spring_rate_scale",
+            BuildParam::Preload => "preload_offset_mm",
+            BuildParam::Friction => "friction",
+            BuildParam::Zero => "zero_offset_mm",
+        }
+    }
+}
+
+/// One fitted parameter.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Fitted {
+    /// The fitted value.
+    pub value: f64,
+    /// Its standard deviation.
+    pub std: f64,
+    /// The design's value.
+    pub designed: f64,
+    /// Whether the log resolves it ([`RESOLUTION`]); an unresolved value is not a finding.
+    pub resolved: bool,
+    /// Held at a given value, not fitted (the zero, unless fitted).
+    pub fixed: bool,
+    /// Its correlation with the fitted zero (0 when the zero is not fitted).
+    pub zero_correlation: f64,
+}
+
+/// One bin of the quasi-static force curve on one stroke.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct DiagnosisBin {
+    /// Mean logged deflection (mm).
+    pub x_mm: f64,
+    /// Loading (true) or unloading stroke.
+    pub loading: bool,
+    /// Measured force with the fitted inertia, damping and outside Coulomb friction taken out (N).
+    pub measured_n: f64,
+    /// The design's forward model there, built as designed and logged with a true zero (N).
+    pub designed_n: f64,
+    /// The forward model with the fitted build (N).
+    pub refitted_n: f64,
+    /// Samples in the bin.
+    pub samples: usize,
+}
+
+/// What `diagnose` found.
+#[derive(Debug, Clone, Serialize)]
+pub struct Diagnosis {
+    /// The springs' rate over the designed rate.
+    pub spring_rate_scale: Fitted,
+    /// Preload offset from the design (mm).
+    pub preload_offset_mm: Fitted,
+    /// Contact friction coefficient.
+    pub friction: Fitted,
+    /// Encoder zero (mm): the log reads the deflection plus this.
+    pub zero_offset_mm: Fitted,
+    /// Inertia taken out (N s^2/mm).
+    pub m_n_s2_per_mm: f64,
+    /// Coulomb friction outside the cam (guides, seals), taken out (N), with its std.
+    pub d0_n: [f64; 2],
+    /// Linear damping taken out (N s/mm).
+    pub d1_n_s_per_mm: f64,
+    /// Cubic damping taken out (N s^3/mm^3).
+    pub d2_n_s3_per_mm3: f64,
+    /// Reduced chi-square of the fit with its noise weights.
+    pub reduced_chi2: f64,
+    /// Samples fitted (reversals inside the velocity noise left out).
+    pub samples: usize,
+    /// RMS of the quasi-static force against the design's forward model, as a percent of
+    /// the designed force's RMS: the miss.
+    pub force_error_before_percent: f64,
+    /// The same against the re-fitted model: what the found deviations leave unexplained.
+    pub force_error_after_percent: f64,
+    /// The findings, one sentence each.
+    pub findings: Vec<String>,
+    /// Parameters the log cannot resolve, each with why.
+    pub unresolved: Vec<String>,
+    /// The binned curves.
+    pub bins: Vec<DiagnosisBin>,
+    /// Savitzky-Golay window (s): of those tried, the one whose fit explains the log best
+    /// (smallest reduced chi-square).
+    pub sg_window_s: f64,
+    /// Every window tried (s) with its fit's reduced chi-square (None: it failed).
+    pub windows_tried: Vec<(f64, Option<f64>)>,
+}
+
+impl Diagnosis {
+    /// The fitted build (unresolved parameters at their fitted values).
+    pub fn as_built(&self) -> AsBuilt {
+        AsBuilt {
+            spring_rate_scale: self.spring_rate_scale.value,
+            preload_offset_mm: self.preload_offset_mm.value,
+            friction: self.friction.value,
+            zero_offset_mm: self.zero_offset_mm.value,
+        }
+    }
+
+    /// The fitted parameter `p`.
+    pub fn get(&self, p: BuildParam) -> &Fitted {
+        match p {
+            BuildParam::SpringRate => &self.spring_rate_scale,
+            BuildParam::Preload => &self.preload_offset_mm,
+            BuildParam::Friction => &self.friction,
+            BuildParam::Zero => &self.zero_offset_mm,
+        }
+    }
+}
+
+/// Parameters of the fit: the four build ones, then m, d0, d1, d2.
+const P: usize = 8;
+
+/// Finite-difference steps of the build parameters.
+const STEPS: [f64; 4] = [1e-6, 1e-6, 1e-7, 1e-6];
+
+/// Most samples fitted; a longer log is thinned evenly to this.
+pub const MAX_SAMPLES: usize = 400_000;
+
+/// A reversal of the stroke is confirmed when the smoothed position comes back this many of
+/// its noise's standard deviations from its extreme; samples that close to a turning point are
+/// left out.
+pub const TURN_SIGMAS: f64 = 6.0;
+
+/// The fit's systematic floor on the standard deviations of rate (relative), preload (mm),
+/// friction and zero (mm): the forward model through a smoothed, noisy position leaves errors
+/// of this order that the noise alone does not explain (on the simulated builds of
+/// docs/CALIBRATION.md the largest were about twice these, against targets five times larger).
+pub const FLOOR: [f64; 4] = [0.002, 0.01, 0.0005, 0.01];
+
+/// Where the encoder zero is fitted, a build parameter more correlated with it than this is
+/// not resolved apart from it.
+pub const MAX_ZERO_CORRELATION: f64 = 0.95;
+
+/// Bins of the curves over the logged deflections.
+const BINS: usize = 30;
+
+/// The fit's prepared samples.
+struct Samples {
+    x: Vec<f64>,
+    xd: Vec<f64>,
+    xdd: Vec<f64>,
+    sgn: Vec<f64>,
+    loading: Vec<bool>,
+    f: Vec<f64>,
+    w: Vec<f64>,
+}
+
+/// One fit: the parameters, their covariance, the reduced chi-square.
+struct Fit {
+    p: [f64; P],
+    cov: DMatrix<f64>,
+    reduced_chi2: f64,
+}
+
+/// The build's rod force at logged deflection `x_mm` with build parameters `p` (rate, preload
+/// offset, friction, zero), on the loading or the unloading stroke.
+fn spring_force(design: &Design, p: &[f64; 4], x_mm: f64, loading: bool) -> f64 {
+    let b = Build {
+        rate: p[0],
+        preload_mm: p[1],
+        roller_mm: 0.0,
+        profile_mm: 0.0,
+        friction: p[2].max(0.0),
+    };
+    let (l, u) = build_force_at(&design.pitch_curve, &design.spec.follower, &b, x_mm - p[3]);
+    if loading {
+        // A jammed build has no loading force: a steep penalty keeps the fit away from it.
+        l.unwrap_or(1e6)
+    } else {
+        u
+    }
+}
+
+/// The stroke of each sample (true: loading) from the turning points of `x`, or None within
+/// `turn` of a turning point's position around it.
+fn strokes(x: &[f64], turn: f64) -> Vec<Option<bool>> {
+    let n = x.len();
+    let mut turns: Vec<usize> = Vec::new();
+    let mut up: Option<bool> = None;
+    let (mut hi, mut lo) = (0usize, 0usize);
+    for i in 1..n {
+        if x[i] > x[hi] {
+            hi = i;
+        }
+        if x[i] < x[lo] {
+            lo = i;
+        }
+        let rising = x[i] - x[lo] > turn;
+        let falling = x[hi] - x[i] > turn;
+        match up {
+            Some(true) | None if falling => {
+                turns.push(hi);
+                up = Some(false);
+                lo = i;
+            }
+            Some(false) | None if rising => {
+                turns.push(lo);
+                up = Some(true);
+                hi = i;
+            }
+            _ => {}
+        }
+    }
+    let mut stroke = vec![None; n];
+    let mut bounds = turns.clone();
+    bounds.push(n.saturating_sub(1));
+    for w in bounds.windows(2) {
+        let (a, b) = (w[0], w[1]);
+        let loading = x[b] > x[a];
+        for s in &mut stroke[a..=b] {
+            *s = Some(loading);
+        }
+    }
+    for &t in &turns {
+        let xt = x[t];
+        let mut i = t;
+        while i > 0 && (x[i] - xt).abs() <= turn {
+            stroke[i] = None;
+            i -= 1;
+        }
+        let mut i = t;
+        while i < n && (x[i] - xt).abs() <= turn {
+            stroke[i] = None;
+            i += 1;
+        }
+    }
+    stroke
+}
+
+/// What the differentiator makes of one log: smoothed position, velocity, acceleration.
+struct Smoothed {
+    x: Vec<f64>,
+    xd: Vec<f64>,
+    xdd: Vec<f64>,
+}
+
+fn smooth(diff: &sg::Differentiator, positions: &[f64], dt: f64) -> Smoothed {
+    Smoothed {
+        x: diff.apply(positions, dt, sg::POSITION),
+        xd: diff.apply(positions, dt, sg::VELOCITY),
+        xdd: diff.apply(positions, dt, sg::ACCELERATION),
+    }
+}
+
+/// Noise levels of the smoothed signals, and the thresholds that follow from them.
+#[derive(Clone, Copy)]
+struct Levels {
+    var_f: f64,
+    var_x: f64,
+    band: f64,
+    turn: f64,
+}
+
+impl Levels {
+    fn new(diff: &sg::Differentiator, noise: &SensorNoise, dt: f64) -> Levels {
+        let var_x = diff.noise_variance(sg::POSITION, noise.position_variance_mm2, dt);
+        Levels {
+            var_f: noise.force_variance_n2,
+            var_x,
+            band: 3.0
+                * diff
+                    .noise_variance(sg::VELOCITY, noise.position_variance_mm2, dt)
+                    .sqrt(),
+            turn: TURN_SIGMAS * var_x.sqrt(),
+        }
+    }
+}
+
+/// The samples to fit: each with its stroke, the Coulomb sign, and its weight (the force
+/// noise plus the smoothed position noise times the designed stiffness there).
+fn prepare(design: &Design, m: &Smoothed, forces: &[f64], levels: &Levels, half: usize) -> Samples {
+    let n = m.x.len();
+    let stroke = strokes(&m.x, levels.turn);
+    // Within the velocity's noise band the Coulomb sign is unknown while the motion starts or
+    // stops (the smoothed velocity lags by up to half a window): only the inside of a rest,
+    // more than half a window from moving samples, counts as at rest.
+    let still: Vec<bool> = m.xd.iter().map(|v| v.abs() <= levels.band).collect();
+    let mut near_motion = vec![false; n];
+    let mut last_moving: Option<usize> = None;
+    for i in 0..n {
+        if !still[i] {
+            last_moving = Some(i);
+        }
+        near_motion[i] = still[i] && last_moving.is_some_and(|j| i - j <= half);
+    }
+    let mut next_moving: Option<usize> = None;
+    for i in (0..n).rev() {
+        if !still[i] {
+            next_moving = Some(i);
+        }
+        near_motion[i] |= still[i] && next_moving.is_some_and(|j| j - i <= half);
+    }
+    let stride = n.div_ceil(MAX_SAMPLES).max(1);
+    let law = &design.law.law;
+    let xmax = design.xmax_mm();
+    let mut s = Samples {
+        x: Vec::new(),
+        xd: Vec::new(),
+        xdd: Vec::new(),
+        sgn: Vec::new(),
+        loading: Vec::new(),
+        f: Vec::new(),
+        w: Vec::new(),
+    };
+    for i in (0..n).step_by(stride) {
+        let Some(loading) = stroke[i] else { continue };
+        if near_motion[i] {
+            continue;
+        }
+        let v = m.xd[i];
+        let sgn = match loading {
+            true if v > levels.band => 1.0,
+            false if v < -levels.band => -1.0,
+            _ => 0.0,
+        };
+        let k = law.stiffness_n_per_mm(m.x[i].clamp(0.0, xmax));
+        s.x.push(m.x[i]);
+        s.xd.push(v);
+        s.xdd.push(m.xdd[i]);
+        s.sgn.push(sgn);
+        s.loading.push(loading);
+        s.f.push(forces[i]);
+        s.w.push(1.0 / (levels.var_f + k * k * levels.var_x).max(1e-12));
+    }
+    s
+}
+
+/// J' W J.
+fn weighted_normal(j: &DMatrix<f64>, w: &[f64]) -> DMatrix<f64> {
+    let mut a = DMatrix::<f64>::zeros(P, P);
+    for (i, &wi) in w.iter().enumerate() {
+        let row = j.row(i);
+        for u in 0..P {
+            for v in u..P {
+                a[(u, v)] += row[u] * wi * row[v];
+            }
+        }
+    }
+    for u in 0..P {
+        for v in 0..u {
+            a[(u, v)] = a[(v, u)];
+        }
+    }
+    a
+}
+
+/// J' W r.
+fn weighted_score(j: &DMatrix<f64>, w: &[f64], r: &[f64]) -> DVector<f64> {
+    let mut g = DVector::<f64>::zeros(P);
+    for (i, (&wi, &ri)) in w.iter().zip(r).enumerate() {
+        for u in 0..P {
+            g[u] += j[(i, u)] * wi * ri;
+        }
+    }
+    g
+}
+
+/// Solves (A + lambda diag A) step = g, scaled to a unit diagonal; a parameter without
+/// information does not move.
+fn solve_scaled(
+    a: &DMatrix<f64>,
+    g: &DVector<f64>,
+    lambda: f64,
+    free: &[bool; P],
+) -> Option<DVector<f64>> {
+    let active = active(a, free);
+    let q = active.len();
+    let d: Vec<f64> = active.iter().map(|&k| a[(k, k)].sqrt()).collect();
+    let mut scaled =
+        DMatrix::<f64>::from_fn(q, q, |u, v| a[(active[u], active[v])] / (d[u] * d[v]));
+    for k in 0..q {
+        scaled[(k, k)] *= 1.0 + lambda;
+    }
+    let rhs = DVector::<f64>::from_fn(q, |u, _| g[active[u]] / d[u]);
+    let x = scaled.cholesky()?.solve(&rhs);
+    let mut step = DVector::<f64>::zeros(P);
+    for (u, &k) in active.iter().enumerate() {
+        step[k] = x[u] / d[u];
+    }
+    Some(step)
+}
+
+/// The parameters that move: free, and with information in the log.
+fn active(a: &DMatrix<f64>, free: &[bool; P]) -> Vec<usize> {
+    (0..P).filter(|&k| free[k] && a[(k, k)] > 0.0).collect()
+}
+
+/// Residuals of the model at `p`.
+fn residuals(design: &Design, s: &Samples, p: &[f64; P]) -> Vec<f64> {
+    let b = [p[0], p[1], p[2], p[3]];
+    (0..s.x.len())
+        .map(|i| {
+            s.f[i]
+                - spring_force(design, &b, s.x[i], s.loading[i])
+                - p[4] * s.xdd[i]
+                - p[5] * s.sgn[i]
+                - p[6] * s.xd[i]
+                - p[7] * s.xd[i].powi(3)
+        })
+        .collect()
+}
+
+/// d(model)/dp at `p`: central differences for the build parameters, the regressors for the
+/// linear ones.
+fn jacobian(design: &Design, s: &Samples, p: &[f64; P]) -> DMatrix<f64> {
+    let m = s.x.len();
+    let mut j = DMatrix::<f64>::zeros(m, P);
+    for k in 0..4 {
+        let (mut a, mut b) = (*p, *p);
+        a[k] += STEPS[k];
+        b[k] -= STEPS[k];
+        let (ra, rb) = (residuals(design, s, &a), residuals(design, s, &b));
+        for i in 0..m {
+            j[(i, k)] = (rb[i] - ra[i]) / (2.0 * STEPS[k]);
+        }
+    }
+    for i in 0..m {
+        j[(i, 4)] = s.xdd[i];
+        j[(i, 5)] = s.sgn[i];
+        j[(i, 6)] = s.xd[i];
+        j[(i, 7)] = s.xd[i].powi(3);
+    }
+    j
+}
+
+/// Levenberg-Marquardt from `p` (the design, and the zero if given) over the `free`
+/// parameters, then the sandwich covariance over blocks of `block` samples (zero for a fixed
+/// parameter).
+fn fit(design: &Design, s: &Samples, block: usize, mut p: [f64; P], free: &[bool; P]) -> Fit {
+    let m = s.x.len();
+    let cost = |r: &[f64]| -> f64 { r.iter().zip(&s.w).map(|(a, w)| a * a * w).sum() };
+    let mut r = residuals(design, s, &p);
+    let mut c = cost(&r);
+    let mut lambda = 1e-3;
+    let mut j = jacobian(design, s, &p);
+    let mut normal = weighted_normal(&j, &s.w);
+    for _ in 0..60 {
+        let g = weighted_score(&j, &s.w, &r);
+        let mut improved = false;
+        for _ in 0..12 {
+            let Some(step) = solve_scaled(&normal, &g, lambda, free) else {
+                lambda *= 10.0;
+                continue;
+            };
+            let mut trial = p;
+            for k in 0..P {
+                trial[k] += step[k];
+            }
+            trial[2] = trial[2].clamp(0.0, 0.9);
+            trial[0] = trial[0].max(-0.95);
+            let rt = residuals(design, s, &trial);
+            let ct = cost(&rt);
+            if ct.is_finite() && ct <= c {
+                let rel = (c - ct) / c.max(1e-300);
+                p = trial;
+                r = rt;
+                c = ct;
+                lambda = (lambda / 10.0).max(1e-9);
+                improved = rel > 1e-10;
+                break;
+            }
+            lambda *= 10.0;
+        }
+        if !improved {
+            break;
+        }
+        j = jacobian(design, s, &p);
+        normal = weighted_normal(&j, &s.w);
+    }
+    // Sandwich: (J'WJ)^-1 (sum over blocks of g_b g_b') (J'WJ)^-1, honest when the residuals
+    // are coloured by the smoothing or the weights are off.
+    let act = active(&normal, free);
+    let q = act.len();
+    let d: Vec<f64> = act.iter().map(|&k| normal[(k, k)].sqrt()).collect();
+    let scaled = DMatrix::<f64>::from_fn(q, q, |u, v| normal[(act[u], act[v])] / (d[u] * d[v]));
+    let inv = scaled
+        .try_inverse()
+        .map(|inv| DMatrix::<f64>::from_fn(q, q, |u, v| inv[(u, v)] / (d[u] * d[v])))
+        .unwrap_or_else(|| DMatrix::<f64>::from_element(q, q, f64::INFINITY));
+    let mut meat = DMatrix::<f64>::zeros(q, q);
+    let mut start = 0;
+    while start < m {
+        let end = (start + block.max(1)).min(m);
+        let mut gb = DVector::<f64>::zeros(q);
+        for i in start..end {
+            for (u, &k) in act.iter().enumerate() {
+                gb[u] += j[(i, k)] * s.w[i] * r[i];
+            }
+        }
+        meat += &gb * gb.transpose();
+        start = end;
+    }
+    let small = &inv * meat * &inv;
+    let mut cov = DMatrix::<f64>::zeros(P, P);
+    for (u, &a) in act.iter().enumerate() {
+        for (v, &b) in act.iter().enumerate() {
+            cov[(a, b)] = small[(u, v)];
+        }
+    }
+    // A free parameter the log carries no information on is unbounded.
+    for k in 0..P {
+        if free[k] && !act.contains(&k) {
+            cov[(k, k)] = f64::INFINITY;
+        }
+    }
+    Fit {
+        p,
+        cov,
+        reduced_chi2: c / (m as f64 - P as f64).max(1.0),
+    }
+}
+
+/// Windows tried when none is given: from [`SHORTEST_WINDOW_S`] up by sqrt(2).
+const WINDOWS: usize = 9;
+
+/// The shortest window tried (s).
+pub const SHORTEST_WINDOW_S: f64 = 0.2;
+
+/// One window's fit, with its samples.
+struct WindowFit {
+    fit: Fit,
+    samples: Samples,
+    window_s: f64,
+}
+
+/// Smooths the log over `window` samples and fits.
+fn fit_at_window(
+    design: &Design,
+    log: &CalibrationLog,
+    noise: &SensorNoise,
+    window: usize,
+    start: [f64; P],
+    free: &[bool; P],
+) -> Result<WindowFit, DiagnoseError> {
+    let dt = log.dt_s();
+    let diff = sg::Differentiator::new(window);
+    let levels = Levels::new(&diff, noise, dt);
+    let motion = smooth(&diff, &log.position_mm, dt);
+    let n = motion.x.len();
+    if n < 200 {
+        return Err(DiagnoseError::Log(format!(
+            "{} samples: expected a log of at least {} samples ({} for the differentiator's window and 200 to fit)",
+            log.len(),
+            diff.window() + 199,
+            diff.window() - 1
+        )));
+    }
+    let forces = &log.force_n[diff.half..diff.half + n];
+    let s = prepare(design, &motion, forces, &levels, diff.half);
+    let m = s.x.len();
+    if m < 200 {
+        return Err(DiagnoseError::Log(format!(
+            "only {m} samples move in a known direction or rest after one: expected a log that \
+             loads and unloads the spring"
+        )));
+    }
+    let stride = n.div_ceil(MAX_SAMPLES).max(1);
+    let block = (4 * diff.window() / stride).max(1).max(m / 400);
+    Ok(WindowFit {
+        fit: fit(design, &s, block, start, free),
+        samples: s,
+        window_s: diff.window() as f64 * dt,
+    })
+}
+
+/// Diagnoses a built spring from its calibration log with the design's forward model.
+/// `window_s` overrides the differentiator's window (default [`sg::WINDOW_SECONDS`]); `zero`
+/// says how the encoder zero is taken: as logged, given, or fitted with the rest.
+///
+/// On an exponential law a shift of the zero is nearly a change of scale, so where the zero
+/// is fitted, the spring rate (and often the preload) trades against it over the logged
+/// stroke: a parameter whose correlation with the zero exceeds [`MAX_ZERO_CORRELATION`] is
+/// named as not resolved apart from it.
+pub fn diagnose(
+    design: &Design,
+    log: &CalibrationLog,
+    noise: &SensorNoise,
+    window_s: Option<f64>,
+    zero: PositionOffset,
+) -> Result<Diagnosis, DiagnoseError> {
+    let dt = log.dt_s();
+    let assembled = AsBuilt::assembled(&design.spec);
+    let nominal_friction = assembled.friction;
+    let (zero_start, zero_free) = match zero {
+        PositionOffset::None => (0.0, false),
+        PositionOffset::Mm(c) => (c, false),
+        PositionOffset::Auto => (0.0, true),
+    };
+    let mut free = [true; P];
+    free[3] = zero_free;
+    let start = [
+        assembled.spring_rate_scale - 1.0,
+        assembled.preload_offset_mm,
+        nominal_friction,
+        zero_start,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+    ];
+    let at = |w: usize| fit_at_window(design, log, noise, w, start, &free);
+    let windows: Vec<usize> = match window_s {
+        Some(w) => vec![((w / dt).round() as usize).max(sg::MIN_WINDOW) | 1],
+        None => {
+            let mut ws: Vec<usize> = (0..WINDOWS)
+                .map(|k| {
+                    ((SHORTEST_WINDOW_S * 2f64.sqrt().powi(k as i32) / dt).round() as usize)
+                        .max(sg::MIN_WINDOW)
+                        | 1
+                })
+                .filter(|&w| w <= log.len() / 8)
+                .collect();
+            ws.dedup();
+            if ws.is_empty() {
+                ws.push(sg::MIN_WINDOW);
+            }
+            ws
+        }
+    };
+    let tried: Vec<Result<WindowFit, DiagnoseError>> = windows.par_iter().map(|&w| at(w)).collect();
+    let candidates: Vec<(f64, Option<f64>)> = tried
+        .iter()
+        .zip(&windows)
+        .map(|(t, &w)| (w as f64 * dt, t.as_ref().ok().map(|f| f.fit.reduced_chi2)))
+        .collect();
+    let mut best: Option<WindowFit> = None;
+    let mut first_error = None;
+    for t in tried {
+        match t {
+            Ok(f) => {
+                if best
+                    .as_ref()
+                    .is_none_or(|b| f.fit.reduced_chi2 < b.fit.reduced_chi2)
+                {
+                    best = Some(f);
+                }
+            }
+            Err(e) => {
+                first_error.get_or_insert(e);
+            }
+        }
+    }
+    let Some(WindowFit {
+        fit,
+        samples: s,
+        window_s,
+    }) = best
+    else {
+        return Err(
+            first_error.unwrap_or_else(|| DiagnoseError::Log("no window fits this log".into()))
+        );
+    };
+    let m = s.x.len();
+    let p = fit.p;
+    let std: [f64; P] = std::array::from_fn(|q| {
+        let own = fit.cov[(q, q)].max(0.0).sqrt();
+        match FLOOR.get(q) {
+            Some(&floor) if free[q] => own.hypot(floor),
+            _ => own,
+        }
+    });
+    let correlation_with_zero = |q: usize| {
+        if !zero_free || q == 3 {
+            return 0.0;
+        }
+        fit.cov[(q, 3)] / (std[q] * std[3]).max(1e-300)
+    };
+    let fitted = |q: usize, value: f64, designed: f64, param: BuildParam| {
+        let limit = RESOLUTION
+            .iter()
+            .find(|(r, _)| *r == param)
+            .map_or(f64::INFINITY, |r| r.1);
+        let zero_correlation = correlation_with_zero(q);
+        Fitted {
+            value,
+            std: std[q],
+            designed,
+            resolved: std[q].is_finite()
+                && 3.0 * std[q] <= limit
+                && zero_correlation.abs() <= MAX_ZERO_CORRELATION,
+            fixed: !free[q],
+            zero_correlation,
+        }
+    };
+    let mut diagnosis = Diagnosis {
+        spring_rate_scale: fitted(
+            0,
+            1.0 + p[0],
+            assembled.spring_rate_scale,
+            BuildParam::SpringRate,
+        ),
+        preload_offset_mm: fitted(1, p[1], assembled.preload_offset_mm, BuildParam::Preload),
+        friction: fitted(2, p[2].max(0.0), nominal_friction, BuildParam::Friction),
+        zero_offset_mm: fitted(3, p[3], 0.0, BuildParam::Zero),
+        m_n_s2_per_mm: p[4],
+        d0_n: [p[5], std[5]],
+        d1_n_s_per_mm: p[6],
+        d2_n_s3_per_mm3: p[7],
+        reduced_chi2: fit.reduced_chi2,
+        samples: m,
+        force_error_before_percent: f64::NAN,
+        force_error_after_percent: f64::NAN,
+        findings: Vec::new(),
+        unresolved: Vec::new(),
+        bins: Vec::new(),
+        sg_window_s: window_s,
+        windows_tried: candidates,
+    };
+    bin_curves(design, &s, &p, &mut diagnosis);
+    describe(&mut diagnosis);
+    Ok(diagnosis)
+}
+
+/// The binned quasi-static curves on each stroke, and the force error before and after.
+fn bin_curves(design: &Design, s: &Samples, p: &[f64; P], diagnosis: &mut Diagnosis) {
+    let (lo, hi) =
+        s.x.iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                (a.min(v), b.max(v))
+            });
+    let width = ((hi - lo) / BINS as f64).max(1e-12);
+    let mut sums = vec![[(0.0, 0.0, 0usize); 2]; BINS];
+    for i in 0..s.x.len() {
+        let k = (((s.x[i] - lo) / width) as usize).min(BINS - 1);
+        let qs =
+            s.f[i] - p[4] * s.xdd[i] - p[5] * s.sgn[i] - p[6] * s.xd[i] - p[7] * s.xd[i].powi(3);
+        let e = &mut sums[k][usize::from(s.loading[i])];
+        e.0 += s.x[i];
+        e.1 += qs;
+        e.2 += 1;
+    }
+    let a = AsBuilt::assembled(&design.spec);
+    let nominal = [
+        a.spring_rate_scale - 1.0,
+        a.preload_offset_mm,
+        a.friction,
+        0.0,
+    ];
+    let build = [p[0], p[1], p[2], p[3]];
+    let (mut before, mut after, mut scale) = (0.0, 0.0, 0.0);
+    for bin in &sums {
+        for (side, &(sx, sf, count)) in bin.iter().enumerate() {
+            if count < 10 {
+                continue;
+            }
+            let loading = side == 1;
+            let xm = sx / count as f64;
+            let b = DiagnosisBin {
+                x_mm: xm,
+                loading,
+                measured_n: sf / count as f64,
+                designed_n: spring_force(design, &nominal, xm, loading),
+                refitted_n: spring_force(design, &build, xm, loading),
+                samples: count,
+            };
+            before += (b.measured_n - b.designed_n).powi(2);
+            after += (b.measured_n - b.refitted_n).powi(2);
+            scale += b.designed_n.powi(2);
+            diagnosis.bins.push(b);
+        }
+    }
+    diagnosis.force_error_before_percent = 100.0 * (before / scale.max(1e-300)).sqrt();
+    diagnosis.force_error_after_percent = 100.0 * (after / scale.max(1e-300)).sqrt();
+}
+
+/// The findings and the unresolved parameters, in words.
+fn describe(d: &mut Diagnosis) {
+    let significant = |f: &Fitted, limit: f64| {
+        f.resolved && (f.value - f.designed).abs() > (3.0 * f.std).max(limit / 3.0)
+    };
+    let mut findings = Vec::new();
+    let mut unresolved = Vec::new();
+    for (param, limit) in RESOLUTION {
+        let f = *d.get(param);
+        if f.fixed {
+            continue;
+        }
+        if !f.resolved {
+            unresolved.push(if f.zero_correlation.abs() > MAX_ZERO_CORRELATION {
+                format!(
+                    "{}: {:.4} +- {:.4}, not resolved apart from the encoder zero over this log \
+                     (correlation {:+.3}): give the rig's zero (--position-offset VALUE) or log \
+                     more of the stroke",
+                    param.key(),
+                    f.value,
+                    f.std,
+                    f.zero_correlation
+                )
+            } else {
+                format!(
+                    "{}: {:.4} +- {:.4}, not resolved by this log (three standard deviations exceed {limit}); \
+                     a log that covers more of the stroke, loads and unloads, or runs longer resolves it",
+                    param.key(),
+                    f.value,
+                    f.std
+                )
+            });
+            continue;
+        }
+        if !significant(&f, limit) {
+            continue;
+        }
+        findings.push(match param {
+            BuildParam::SpringRate => format!(
+                "the springs are {:.1} % {} than designed (+- {:.1} %)",
+                100.0 * (f.value / f.designed - 1.0).abs(),
+                if f.value > f.designed { "stiffer" } else { "softer" },
+                100.0 * f.std / f.designed
+            ),
+            BuildParam::Preload => format!(
+                "the preload is {:.3} mm {} (+- {:.3} mm of follower travel)",
+                (f.value - f.designed).abs(),
+                if f.value < f.designed { "short" } else { "long" },
+                f.std
+            ),
+            BuildParam::Friction => format!(
+                "the contact friction is {:.4} (+- {:.4}) against {:.4} designed",
+                f.value, f.std, f.designed
+            ),
+            BuildParam::Zero => format!(
+                "the encoder zero is {:+.3} mm off (+- {:.3} mm): the log reads the deflection plus this; \
+                 validate and estimate take it out with --position-offset auto",
+                f.value, f.std
+            ),
+        });
+    }
+    if d.d0_n[0].abs() > 3.0 * d.d0_n[1] && d.d0_n[0].abs() > 0.05 {
+        findings.push(format!(
+            "a Coulomb friction of {:.2} N (+- {:.2} N) acts outside the cam (rod guides, seals)",
+            d.d0_n[0], d.d0_n[1]
+        ));
+    }
+    d.findings = findings;
+    d.unresolved = unresolved;
+}
