@@ -383,6 +383,7 @@ fn angle_advice(
         (m.max_theta_deg - target_deg).max(floor)
     };
     let ks0 = f.spring_rate_n_per_mm;
+    let (ks_now, yp_now) = (short(ks0), short(f.preload_mm));
     let by_rate = first_crossing(ks0, rate_candidates(ks0), |ks| {
         metrics(input, &f.with_spring_rate(ks)).map_or(f64::NAN, deficit)
     });
@@ -395,11 +396,11 @@ fn angle_advice(
     let by_preload = by_preload.map(round_up);
     let text = match (by_rate, by_preload) {
         (Some(ks), Some(yp)) => format!(
-            "Raise follower.spring_rate from {ks0} to at least {ks} N/mm, or follower.preload from {yp0} to at least {yp} mm, {keep}."
+            "Raise follower.spring_rate from {ks_now} to at least {ks} N/mm, or follower.preload from {yp_now} to at least {yp} mm, {keep}."
         ),
-        (Some(ks), None) => format!("Raise follower.spring_rate from {ks0} to at least {ks} N/mm {keep}."),
+        (Some(ks), None) => format!("Raise follower.spring_rate from {ks_now} to at least {ks} N/mm {keep}."),
         (None, Some(yp)) => format!(
-            "Raise follower.preload from {yp0} to at least {yp} mm {keep}; no spring rate alone can, because \
+            "Raise follower.preload from {yp_now} to at least {yp} mm {keep}; no spring rate alone can, because \
              the angle near x = 0 is set by the preload."
         ),
         (None, None) => format!("Neither a stiffer spring nor more preload alone can keep the pressure angle at or below {target_deg:.2} deg \
@@ -676,7 +677,7 @@ fn undercut(input: &CheckInput<'_>) -> Check {
         if let Some(yp) = by_preload {
             parts.push(format!(
                 "raise follower.preload from {} to at least {yp} mm (the smallest preload that removes the undercut with {:.0} % margin)",
-                f.preload_mm,
+                short(f.preload_mm),
                 (UNDERCUT_WARN_RATIO - 1.0) * 100.0
             ));
             suggestions.push(Suggestion { key: "follower.preload", value: yp, unit: "mm" });
@@ -788,4 +789,11 @@ fn contact_stress(input: &CheckInput<'_>) -> Check {
         advice,
         suggestions,
     }
+}
+
+/// A present value as advice quotes it: at most four decimals, trailing zeros dropped.
+fn short(v: f64) -> String {
+    let t = format!("{v:.4}");
+    let t = t.trim_end_matches('0').trim_end_matches('.');
+    t.to_string()
 }
