@@ -146,6 +146,36 @@ pub struct SimulateOptions {
     pub log_path: Option<PathBuf>,
     /// Where the truth goes (default next to the log, `truth.json`).
     pub truth_path: Option<PathBuf>,
+    /// Build the spring off its design ([`BuildChange`]); None simulates the designed law.
+    pub build: Option<BuildChange>,
+}
+
+/// How `simulate` builds a spring off its design: each given field changes the build of the
+/// design's own cam (its forward model, with loading and unloading curves).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct BuildChange {
+    /// The springs' rate times this.
+    pub rate_scale: Option<f64>,
+    /// Preload as assembled minus the designed one (mm of follower travel).
+    pub preload_offset_mm: Option<f64>,
+    /// The contact friction coefficient of the build (default: the design's).
+    pub friction: Option<f64>,
+    /// The rig's encoder reads the deflection plus this (mm).
+    pub zero_offset_mm: Option<f64>,
+}
+
+impl BuildChange {
+    /// The build of `spec` as it assembles it (`[assembly]`) with these changes: the rate
+    /// scaled, the preload offset added, the friction and the zero replaced.
+    pub fn as_built(&self, spec: &Spec) -> crate::verdict::diagnose::AsBuilt {
+        let a = crate::verdict::diagnose::AsBuilt::assembled(spec);
+        crate::verdict::diagnose::AsBuilt {
+            spring_rate_scale: a.spring_rate_scale * self.rate_scale.unwrap_or(1.0),
+            preload_offset_mm: a.preload_offset_mm + self.preload_offset_mm.unwrap_or(0.0),
+            friction: self.friction.unwrap_or(a.friction),
+            zero_offset_mm: self.zero_offset_mm.unwrap_or(0.0),
+        }
+    }
 }
 
 /// What `camspring simulate` wrote.
@@ -157,8 +187,10 @@ pub struct SimulateRun {
     pub truth_path: PathBuf,
     /// Samples written.
     pub samples: usize,
-    /// The spring law simulated.
+    /// The spring law simulated (a built spring's loading curve).
     pub law: ForceLaw,
+    /// The build simulated, when off the design.
+    pub as_built: Option<crate::verdict::diagnose::AsBuilt>,
 }
 
 /// The law a spec designs: solved from its targets or conditions, given, or tabulated.
@@ -185,7 +217,28 @@ pub fn run_simulate(spec_path: Option<&Path>, opts: &SimulateOptions) -> Result<
     let spec = load_spec(spec_path)?;
     let law = designed_law(&spec)?;
     let xmax = spec.law.xmax_mm();
-    let (log, truth) = simulate(&law, xmax, law.force_n(xmax), &opts.settings)?;
+    let fmax = law.force_n(xmax);
+    // A spec assembled with other parts than its cam was cut for is always a build.
+    let build = opts
+        .build
+        .or_else(|| spec.assembly.is_changed().then(BuildChange::default));
+    let (log, truth, as_built) = match &build {
+        None => {
+            let (log, truth) = simulate(&law, xmax, fmax, &opts.settings)?;
+            (log, truth, None)
+        }
+        Some(change) => {
+            let design = crate::design::design_with(&spec, false)?;
+            let as_built = change.as_built(&spec);
+            let spring = crate::verdict::diagnose::built_spring(&design, &as_built)
+                .map_err(|e| Error::Argument(e.to_string()))?;
+            // A build stiffer than designed pulls harder than Fmax at the end of the stroke.
+            let limit = spring.loading.force_n(xmax).max(fmax);
+            let (log, truth) =
+                crate::estimate::sim::simulate_built(&spring, xmax, 1.05 * limit, &opts.settings)?;
+            (log, truth, Some(as_built))
+        }
+    };
     let log_path = opts
         .log_path
         .clone()
@@ -194,7 +247,19 @@ pub fn run_simulate(spec_path: Option<&Path>, opts: &SimulateOptions) -> Result<
         .truth_path
         .clone()
         .unwrap_or_else(|| log_path.with_extension("truth.json"));
-    let truth_json = serde_json::to_vec(&truth).map_err(|e| ExportError::Encode {
+    #[derive(serde::Serialize)]
+    struct TruthFile<'a> {
+        #[serde(flatten)]
+        truth: &'a crate::estimate::sim::Truth,
+        /// The build, when off the design.
+        #[serde(skip_serializing_if = "Option::is_none")]
+        as_built: Option<crate::verdict::diagnose::AsBuilt>,
+    }
+    let truth_json = serde_json::to_vec(&TruthFile {
+        truth: &truth,
+        as_built,
+    })
+    .map_err(|e| ExportError::Encode {
         what: "truth.json",
         message: e.to_string(),
     })?;
@@ -204,7 +269,12 @@ pub fn run_simulate(spec_path: Option<&Path>, opts: &SimulateOptions) -> Result<
         log_path,
         truth_path,
         samples: log.len(),
-        law,
+        law: if as_built.is_some() {
+            truth.law.clone()
+        } else {
+            law
+        },
+        as_built,
     })
 }
 
@@ -659,16 +729,14 @@ pub fn run_validate(
     let designed = designed_law(&spec)?;
     // By default the force is judged against the band of builds the design's tolerances
     // allow; a flat --tolerance judges it against the law instead.
+    let design = crate::design::design_with(&spec, false)?;
     let band = match tolerance {
         Some(_) => None,
-        None => {
-            let d = crate::design::design_with(&spec, false)?;
-            Some(crate::cam::tolerance::force_band(
-                &d.pitch_curve,
-                &spec.follower,
-                &spec.tolerances,
-            ))
-        }
+        None => Some(crate::cam::tolerance::force_band(
+            &design.pitch_curve,
+            &spec.follower,
+            &spec.tolerances,
+        )),
     };
     let tolerance = tolerance.unwrap_or(crate::verdict::validate::BAND_MODE_TOLERANCE);
     let mut log = read_log_file(log_path, map, sampling_tolerance, true)?;
@@ -693,6 +761,36 @@ pub fn run_validate(
     let log_name = log_path
         .file_name()
         .map_or(String::new(), |n| n.to_string_lossy().into_owned());
+    // The force is judged stroke by stroke from the diagnosis of the build (the design's
+    // forward model with the build free), loading and unloading apart; a log it cannot
+    // diagnose keeps the single quasi-static curve.
+    let diagnosis = crate::verdict::diagnose::diagnose(
+        &design,
+        &log,
+        &opts.noise,
+        opts.window_s,
+        PositionOffset::None,
+    )
+    .ok();
+    let judge_strokes = |criteria: &mut Vec<crate::verdict::validate::Criterion>,
+                         exits: &mut Vec<crate::verdict::validate::BandExit>|
+     -> bool {
+        let Some(d) = &diagnosis else { return false };
+        let (stroke, stroke_exits) = crate::verdict::validate::stroke_criteria(
+            d,
+            &designed,
+            spec.follower.friction_correction,
+            tolerance,
+            band.as_ref(),
+        );
+        criteria.retain(|c| !matches!(c.name, "force_rms" | "force_max" | "force_band"));
+        criteria.extend(stroke);
+        *exits = stroke_exits;
+        true
+    };
+    let diagnosis_html = diagnosis.as_ref().map_or(String::new(), |d| {
+        crate::render::html::diagnosis_section(d, &crate::render::calibration::diagnosis_svg(d))
+    });
     // Every verdict also states, and judges, what part of the designed stroke the log covers.
     let judge_coverage = |lo: f64, hi: f64| {
         crate::verdict::validate::coverage(&designed, lo, hi, spec.law.xmax_mm())
@@ -724,19 +822,51 @@ pub fn run_validate(
                 }
             };
             let consistent = est.as_ref().filter(|e| e.consistency.consistent);
+            // The EKF and identification see a mixture of the loading and unloading strokes:
+            // their k2 is judged against the exponents of the designed build's two curves over
+            // the logged range, the stiffness line against its mean curve (the law itself when
+            // the build has no contact friction).
+            let (lo, hi) = log
+                .position_mm
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+                    (a.min(x), b.max(x))
+                });
+            let exponents = crate::verdict::validate::build_exponents(&design, lo, hi);
+            let reference = exponents.map_or(*law, |e| e.mean);
             let mut v = crate::verdict::validate::validate_with(
-                law,
+                &reference,
                 id,
                 consistent,
                 &log.position_mm,
                 tolerance,
                 band.as_ref(),
             );
+            v.designed = *law;
+            v.exponents = exponents;
+            let (judged_k2, judged_k2_std) = (v.ekf_k2_per_mm, v.ekf_k2_per_mm_std);
+            let consistent = v.ekf_consistent;
+            if let (Some(e), Some(c)) = (exponents, v.criteria.iter_mut().find(|c| c.name == "k2"))
+            {
+                c.deviation_percent = e.k2_deviation_percent(judged_k2, judged_k2_std);
+                c.pass =
+                    c.deviation_percent.is_finite() && c.deviation_percent <= c.tolerance_percent;
+                c.what = if consistent {
+                    "EKF exponent rate k2 beyond the exponents of the designed build's loading and unloading curves and two of its standard deviations"
+                } else {
+                    "identified exponent rate k2 beyond the exponents of the designed build's loading and unloading curves and two of its standard deviations (the EKF was not consistent on this log)"
+                };
+                v.pass = v.criteria.iter().all(|c| c.pass);
+            }
             v.position_offset_mm = offset_mm;
+            if judge_strokes(&mut v.criteria, &mut v.band_exits) {
+                v.pass = v.criteria.iter().all(|c| c.pass);
+            }
             let (c, cov) = judge_coverage(v.range_min_mm, v.range_max_mm);
             v.pass &= c.pass;
             v.criteria.push(c);
             v.coverage = Some(cov);
+            v.diagnosis = diagnosis.clone();
             // The measured force-deflection points come from the quasi-static curve.
             let points = validate_curve(&designed, &log, &opts.noise, tolerance, band.as_ref());
             let force_svg = crate::render::calibration::force_points_svg(
@@ -749,18 +879,33 @@ pub fn run_validate(
                 Some(est) => validation_svg(&v, &est.run),
                 None => force_svg.clone(),
             };
-            let html = crate::render::html::validation_html(&v, &svg_text, &log_name, &force_svg);
+            let html = crate::render::html::validation_html(
+                &v,
+                &svg_text,
+                &log_name,
+                &force_svg,
+                &diagnosis_html,
+            );
             (Verdict::Law(v), svg_text, html)
         }
         ForceLaw::Table(_) | ForceLaw::Polynomial(_) => {
             let mut v = validate_curve(&designed, &log, &opts.noise, tolerance, band.as_ref());
             v.position_offset_mm = offset_mm;
+            if judge_strokes(&mut v.criteria, &mut v.band_exits) {
+                v.pass = !v.bins.is_empty() && v.criteria.iter().all(|c| c.pass);
+            }
             let (c, cov) = judge_coverage(v.range_min_mm, v.range_max_mm);
             v.pass &= c.pass;
             v.criteria.push(c);
             v.coverage = Some(cov);
+            v.diagnosis = diagnosis.clone();
             let svg_text = curve_validation_svg(&v);
-            let html = crate::render::html::curve_validation_html(&v, &svg_text, &log_name);
+            let html = crate::render::html::curve_validation_html(
+                &v,
+                &svg_text,
+                &log_name,
+                &diagnosis_html,
+            );
             (Verdict::Curve(v), svg_text, html)
         }
     };
@@ -841,32 +986,388 @@ pub struct SpringsRun {
 /// `text` (a spec) with `key = value` set in its `[follower]` table: the key's line replaced,
 /// or added right after the table's header.
 fn set_follower_key(text: &str, key: &str, value: &str) -> String {
+    set_key(text, Some("follower"), key, value)
+}
+
+/// Whether `line` starts the table `[name]`.
+fn is_table_header(line: &str, name: &str) -> bool {
+    line.trim_start()
+        .strip_prefix('[')
+        .and_then(|r| r.split(']').next())
+        .is_some_and(|t| t.trim() == name)
+}
+
+/// Whether `line` sets `key` (`key = ...`).
+fn sets_key(line: &str, key: &str) -> bool {
+    line.trim_start()
+        .strip_prefix(key)
+        .is_some_and(|rest| rest.trim_start().starts_with('='))
+}
+
+/// `text` (a spec) with `key = value` in table `table` (None: the top level, before the first
+/// table): the key's line replaced, or added at the table's end (the table is appended when
+/// absent).
+pub fn set_key(text: &str, table: Option<&str>, key: &str, value: &str) -> String {
+    let line = format!("{key} = {value}");
     let mut out: Vec<String> = Vec::new();
-    let mut in_follower = false;
+    let mut inside = table.is_none();
     let mut done = false;
-    for line in text.lines() {
-        let trimmed = line.trim_start();
-        if trimmed.starts_with('[') {
-            if in_follower && !done {
-                out.push(format!("{key} = {value}"));
+    for l in text.lines() {
+        let header = l.trim_start().starts_with('[');
+        if header {
+            if inside && !done {
+                // The end of the table: add the key before the next header (and before the
+                // blank lines and comments that lead into it).
+                let mut tail = Vec::new();
+                while out
+                    .last()
+                    .is_some_and(|p| p.trim().is_empty() || p.trim_start().starts_with('#'))
+                {
+                    tail.push(out.pop().unwrap_or_default());
+                }
+                out.push(line.clone());
+                out.extend(tail.into_iter().rev());
                 done = true;
             }
-            in_follower = trimmed.starts_with("[follower]");
+            inside = table.is_some_and(|t| is_table_header(l, t));
         }
-        let is_key = trimmed
-            .strip_prefix(key)
-            .is_some_and(|rest| rest.trim_start().starts_with('='));
-        if in_follower && is_key && !done {
-            out.push(format!("{key} = {value}"));
+        if inside && !done && !header && sets_key(l, key) {
+            // Keep the line's comment (the value's unit and meaning), when it has one.
+            match trailing_comment(l) {
+                Some(c) => out.push(format!("{line}  {c}")),
+                None => out.push(line.clone()),
+            }
             done = true;
             continue;
         }
-        out.push(line.to_string());
+        out.push(l.to_string());
     }
     if !done {
-        out.push(format!("{key} = {value}"));
+        if inside {
+            out.push(line);
+        } else if let Some(t) = table {
+            out.push(String::new());
+            out.push(format!("[{t}]"));
+            out.push(line);
+        }
     }
     out.join("\n") + "\n"
+}
+
+/// The comment that ends a TOML line (`# ...`, outside strings), if any.
+fn trailing_comment(line: &str) -> Option<&str> {
+    let mut quote: Option<char> = None;
+    let mut escaped = false;
+    for (i, c) in line.char_indices() {
+        match quote {
+            Some(q) => {
+                if escaped {
+                    escaped = false;
+                } else if c == '\\' && q == '"' {
+                    escaped = true;
+                } else if c == q {
+                    quote = None;
+                }
+            }
+            None if c == '"' || c == '\'' => quote = Some(c),
+            None if c == '#' => return Some(&line[i..]),
+            None => {}
+        }
+    }
+    None
+}
+
+/// `text` (a spec) without `key` in table `table` (None: the top level).
+pub fn remove_key(text: &str, table: Option<&str>, key: &str) -> String {
+    let mut inside = table.is_none();
+    let mut out = Vec::new();
+    for l in text.lines() {
+        if l.trim_start().starts_with('[') {
+            inside = table.is_some_and(|t| is_table_header(l, t));
+        } else if inside && sets_key(l, key) {
+            continue;
+        }
+        out.push(l);
+    }
+    out.join("\n") + "\n"
+}
+
+/// `text` (a spec) without the table `[table]` and its keys.
+pub fn remove_table(text: &str, table: &str) -> String {
+    let mut inside = false;
+    let mut out = Vec::new();
+    for l in text.lines() {
+        if l.trim_start().starts_with('[') {
+            inside = is_table_header(l, table);
+        }
+        if !inside {
+            out.push(l);
+        }
+    }
+    out.join("\n") + "\n"
+}
+
+/// A TOML basic string.
+fn toml_string(text: &str) -> String {
+    toml::Value::String(text.to_string()).to_string()
+}
+
+/// The text of a revised spec: the original's text with the revision and its note, and the
+/// option's parts (an `[assembly]` for a shim or a catalogue spring, new `[follower]` keys
+/// and no `[assembly]` for a re-cut cam). It is read back and compared with the option's
+/// spec, so that the file says what was judged.
+pub fn revised_spec_text(
+    original: &str,
+    option: &crate::verdict::revise::RevisionOption,
+) -> Result<String> {
+    use crate::verdict::revise::ChangeKind;
+    let s = &option.spec;
+    let rev = s.revision.clone().unwrap_or_default();
+    let mut text = set_key(original, None, "revision", &toml_string(&rev));
+    text = set_key(
+        &text,
+        None,
+        "revision_note",
+        &toml_string(s.revision_note.as_deref().unwrap_or("")),
+    );
+    if text.lines().any(|l| is_table_header(l, "drawing")) {
+        text = set_key(&text, Some("drawing"), "revision", &toml_string(&rev));
+    }
+    match option.kind {
+        ChangeKind::Shim | ChangeKind::CatalogueSpring => {
+            text = set_key(
+                &text,
+                Some("assembly"),
+                "shim",
+                &toml_string(&format!("{:.4} mm", s.assembly.shim_mm)),
+            );
+            if let Some(k) = s.assembly.spring_rate_n_per_mm {
+                text = set_key(
+                    &text,
+                    Some("assembly"),
+                    "spring_rate",
+                    &toml_string(&format!("{k:.4} N/mm")),
+                );
+            }
+            if let Some(part) = &s.assembly.spring_part {
+                text = set_key(&text, Some("assembly"), "spring_part", &toml_string(part));
+            }
+            if let Some(mu) = s.assembly.friction {
+                text = set_key(&text, Some("assembly"), "friction", &format!("{mu:.5}"));
+            }
+        }
+        ChangeKind::RecutCam => {
+            text = remove_table(&text, "assembly");
+            for key in ["pin_friction", "pin_radius", "rolling_resistance"] {
+                text = remove_key(&text, Some("follower"), key);
+            }
+            let f = &s.follower;
+            text = set_follower_key(
+                &text,
+                "spring_rate",
+                &toml_string(&format!("{:.4} N/mm", f.spring_rate_n_per_mm)),
+            );
+            text = set_follower_key(
+                &text,
+                "preload",
+                &toml_string(&format!("{:.4} mm", f.preload_mm)),
+            );
+            text = set_follower_key(
+                &text,
+                "friction",
+                &format!("{:.5}", f.friction_coefficient()),
+            );
+        }
+    }
+    // Read back: the file must say what was judged (rounded as written).
+    let back = crate::spec::parse(&text).map_err(|source| Error::Spec {
+        path: "the revised spec".into(),
+        source,
+    })?;
+    // As written: 4 decimals of a length or a rate, 5 of a friction coefficient.
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-3 * b.abs() + 1e-4;
+    let same = close(
+        back.follower.spring_rate_n_per_mm,
+        s.follower.spring_rate_n_per_mm,
+    ) && close(back.follower.preload_mm, s.follower.preload_mm)
+        && close(
+            back.follower.friction_coefficient(),
+            s.follower.friction_coefficient(),
+        )
+        && close(back.assembly.shim_mm, s.assembly.shim_mm)
+        && close(
+            back.assembly.spring_rate_n_per_mm.unwrap_or(0.0),
+            s.assembly.spring_rate_n_per_mm.unwrap_or(0.0),
+        )
+        && close(
+            back.assembly.friction.unwrap_or(0.0),
+            s.assembly.friction.unwrap_or(0.0),
+        )
+        && back.revision == s.revision;
+    if !same {
+        return Err(Error::Argument(
+            "revise: the revised spec as written does not read back as the option judged; \
+             the original spec's layout defeats the editor (write the [follower] keys on their own lines)"
+                .into(),
+        ));
+    }
+    Ok(text)
+}
+
+/// What `camspring diagnose` found and wrote.
+#[derive(Debug, Clone)]
+pub struct DiagnoseRun {
+    /// The diagnosis.
+    pub diagnosis: crate::verdict::diagnose::Diagnosis,
+    /// The plot written.
+    pub svg_path: PathBuf,
+}
+
+/// Options of `camspring diagnose` and `revise`: the log's columns, the sensors, the window
+/// and the encoder zero.
+#[derive(Debug, Clone)]
+pub struct DiagnoseOptions {
+    /// The log's columns.
+    pub map: crate::estimate::log::ColumnMap,
+    /// Allowed sampling jitter.
+    pub sampling_tolerance: f64,
+    /// Sensor noise.
+    pub noise: crate::estimate::identify::SensorNoise,
+    /// Savitzky-Golay window (s), or chosen from the data.
+    pub window_s: Option<f64>,
+    /// The encoder zero: as logged, given, or fitted.
+    pub zero: PositionOffset,
+}
+
+/// The design and the diagnosis of a log against it.
+fn diagnose_log(
+    spec: &Spec,
+    log_path: &Path,
+    opts: &DiagnoseOptions,
+) -> Result<(crate::design::Design, crate::verdict::diagnose::Diagnosis)> {
+    let design = crate::design::design_with(spec, false)?;
+    let log = read_log_file(log_path, &opts.map, opts.sampling_tolerance, true)?;
+    let diagnosis =
+        crate::verdict::diagnose::diagnose(&design, &log, &opts.noise, opts.window_s, opts.zero)
+            .map_err(|e| Error::Argument(format!("diagnose {}: {e}", log_path.display())))?;
+    Ok((design, diagnosis))
+}
+
+/// Runs `camspring diagnose`: the log explained by the design's forward model with the build
+/// free; writes diagnosis.svg (default next to the log).
+pub fn run_diagnose(
+    spec_path: &Path,
+    log_path: &Path,
+    opts: &DiagnoseOptions,
+    svg: Option<&Path>,
+) -> Result<DiagnoseRun> {
+    let spec = load_spec(Some(spec_path))?;
+    let (_, diagnosis) = diagnose_log(&spec, log_path, opts)?;
+    let svg_path = svg.map(Path::to_path_buf).unwrap_or_else(|| {
+        log_path
+            .parent()
+            .unwrap_or(Path::new("."))
+            .join("diagnosis.svg")
+    });
+    write_atomic(
+        &svg_path,
+        crate::render::calibration::diagnosis_svg(&diagnosis).as_bytes(),
+    )?;
+    Ok(DiagnoseRun {
+        diagnosis,
+        svg_path,
+    })
+}
+
+/// What `camspring revise` decided and wrote.
+#[derive(Debug, Clone)]
+pub struct ReviseRun {
+    /// The diagnosis it rests on.
+    pub diagnosis: crate::verdict::diagnose::Diagnosis,
+    /// The revision.
+    pub revision: crate::verdict::revise::Revision,
+    /// The folder.
+    pub out_dir: PathBuf,
+    /// Files written.
+    pub written: Vec<PathBuf>,
+    /// The revised spec, when one was written.
+    pub spec_path: Option<PathBuf>,
+}
+
+/// The name of the file every `revise` run writes its decision to.
+pub const REVISION_JSON: &str = "revision.json";
+
+/// Runs `camspring revise`: diagnoses the log, tries the options and writes the folder
+/// `out_dir` as one run: revision.json, the revised spec `<name>-<revision>.toml`, and for a
+/// re-cut cam the whole output set of the revised design.
+pub fn run_revise(
+    spec_path: &Path,
+    log_path: &Path,
+    opts: &DiagnoseOptions,
+    tolerance: f64,
+    out_dir: &Path,
+) -> Result<ReviseRun> {
+    use crate::verdict::revise::{revise, unresolved_parts, ChangeKind, Revision};
+    let spec = load_spec(Some(spec_path))?;
+    let original = std::fs::read_to_string(spec_path).map_err(|source| Error::Read {
+        path: spec_path.to_path_buf(),
+        source,
+    })?;
+    let (design, diagnosis) = diagnose_log(&spec, log_path, opts)?;
+    let unresolved = unresolved_parts(&diagnosis);
+    let revision = if unresolved.is_empty() {
+        revise(&design, &diagnosis, tolerance)
+    } else {
+        Revision {
+            revision: crate::verdict::revise::next_revision(spec.revision.as_deref()),
+            error_as_built_max_percent: f64::NAN,
+            error_as_built_rms_percent: f64::NAN,
+            tolerance_percent: 100.0 * tolerance,
+            options: Vec::new(),
+            chosen: None,
+            refusal: Some(format!(
+                "this log does not resolve {} (see the diagnosis); a revision would be a guess. \
+                 Log a run that loads and unloads over most of the stroke, or give the rig's zero \
+                 with --position-offset",
+                unresolved.join(", ")
+            )),
+            note: String::new(),
+        }
+    };
+    let mut files: Vec<(String, Vec<u8>)> = Vec::new();
+    let mut owned: Vec<String> = vec![REVISION_JSON.to_string()];
+    let mut spec_name = None;
+    if let Some(o) = revision.chosen() {
+        let name = format!("{}-{}.toml", spec.name, revision.revision);
+        files.push((name.clone(), revised_spec_text(&original, o)?.into_bytes()));
+        owned.push(name.clone());
+        spec_name = Some(name);
+        if o.kind == ChangeKind::RecutCam {
+            let d = crate::design::design(&o.spec)?;
+            let outputs = plan(&d)?;
+            files.extend(crate::export::design_files(&d, &outputs)?);
+        }
+    }
+    let json = serde_json::to_vec_pretty(&serde_json::json!({
+        "diagnosis": diagnosis,
+        "revision": revision,
+        "spec": spec_name,
+    }))
+    .map_err(|e| ExportError::Encode {
+        what: REVISION_JSON,
+        message: e.to_string(),
+    })?;
+    files.insert(0, (REVISION_JSON.to_string(), json));
+    let mut owned_refs: Vec<&str> = owned.iter().map(String::as_str).collect();
+    owned_refs.extend(crate::outputs::ALL_OUTPUTS.iter().copied());
+    let written = crate::export::folder::write_set(out_dir, &files, &owned_refs)?;
+    Ok(ReviseRun {
+        diagnosis,
+        spec_path: spec_name.map(|n| out_dir.join(n)),
+        revision,
+        out_dir: out_dir.to_path_buf(),
+        written,
+    })
 }
 
 /// Runs `camspring springs`: ranks the spec's catalogue springs; with `apply`, writes the spec

@@ -517,6 +517,13 @@ pub fn format_validation(v: &Validation) -> String {
         v.ekf_k2_per_mm,
         v.ekf_k2_per_mm_std
     );
+    if let Some(e) = v.exponents {
+        let _ = writeln!(
+            s,
+            "  the designed build's exponents over this range (contact friction): loading {:.6}, unloading {:.6}, mean {:.6} /mm",
+            e.loading_k2_per_mm, e.unloading_k2_per_mm, e.mean.k2_per_mm
+        );
+    }
     s.push_str(&band_exit_lines(&v.band_exits));
     s.push_str(&coverage_lines(v.coverage.as_ref(), v.position_offset_mm));
     s
@@ -824,4 +831,196 @@ pub fn force_points_svg(
         ..Default::default()
     };
     plot::document(&[panel], 760.0, 460.0).to_string()
+}
+
+/// The diagnosis plot: the measured quasi-static force on each stroke, the design's forward
+/// model built as designed, and the model with the fitted build.
+pub fn diagnosis_svg(d: &crate::verdict::diagnose::Diagnosis) -> String {
+    use crate::verdict::diagnose::DiagnosisBin;
+    let pick = |loading: bool, f: &dyn Fn(&DiagnosisBin) -> f64| {
+        d.bins
+            .iter()
+            .filter(|b| b.loading == loading)
+            .map(|b| (b.x_mm, f(b)))
+            .collect::<Vec<_>>()
+    };
+    let series = |what: &dyn Fn(&DiagnosisBin, f64) -> f64| {
+        let s =
+            |label: &str, loading, color, dashed, dots, value: &dyn Fn(&DiagnosisBin) -> f64| {
+                Series {
+                    label: label.into(),
+                    points: pick(loading, &|b| what(b, value(b))),
+                    color,
+                    dashed,
+                    dots,
+                }
+            };
+        vec![
+            s(
+                "designed, loading (forward model, as designed)",
+                true,
+                "#888",
+                true,
+                false,
+                &|b| b.designed_n,
+            ),
+            s("designed, unloading", false, "#bbb", true, false, &|b| {
+                b.designed_n
+            }),
+            s(
+                "re-fitted build, loading",
+                true,
+                "#000",
+                false,
+                false,
+                &|b| b.refitted_n,
+            ),
+            s(
+                "re-fitted build, unloading",
+                false,
+                "#555",
+                false,
+                false,
+                &|b| b.refitted_n,
+            ),
+            s(
+                "measured, loading (dynamics removed, binned)",
+                true,
+                "#d62728",
+                false,
+                true,
+                &|b| b.measured_n,
+            ),
+            s("measured, unloading", false, "#1f77b4", false, true, &|b| {
+                b.measured_n
+            }),
+        ]
+    };
+    let force = Panel {
+        title: "Force against logged deflection".into(),
+        x_label: "logged deflection x (mm)".into(),
+        y_label: "force F (N)".into(),
+        series: series(&|_, f| f),
+        ..Default::default()
+    };
+    let deviation = Panel {
+        title: "Against the design's own forward model".into(),
+        x_label: "logged deflection x (mm)".into(),
+        y_label: "deviation from the design, same stroke (%)".into(),
+        // The left panel's legend serves both.
+        series: series(&|b, f| 100.0 * (f / b.designed_n - 1.0))
+            .into_iter()
+            .map(|s| Series {
+                label: String::new(),
+                ..s
+            })
+            .collect(),
+        ..Default::default()
+    };
+    plot::document(&[force, deviation], 620.0, 460.0).to_string()
+}
+
+/// One fitted build parameter as text: value, standard deviation, design, and whether the
+/// log resolves it.
+fn fitted_line(name: &str, unit: &str, f: &crate::verdict::diagnose::Fitted) -> String {
+    let state = if f.fixed {
+        "given".to_string()
+    } else if f.resolved {
+        "resolved".to_string()
+    } else {
+        "NOT RESOLVED by this log".to_string()
+    };
+    format!(
+        "  {name:<22} {:>10.4} +- {:<8.4}{unit:<4} designed {:.4}  ({state})\n",
+        f.value, f.std, f.designed
+    )
+}
+
+/// `camspring diagnose` as text.
+pub fn format_diagnosis(d: &crate::verdict::diagnose::Diagnosis) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "diagnosis: the force misses the design's forward model by {:.2} % RMS; the fitted build leaves {:.2} % unexplained",
+        d.force_error_before_percent, d.force_error_after_percent
+    );
+    if d.findings.is_empty() {
+        s.push_str("  no build parameter is off its design beyond its uncertainty\n");
+    }
+    for f in &d.findings {
+        let _ = writeln!(s, "  - {f}");
+    }
+    for u in &d.unresolved {
+        let _ = writeln!(s, "  ? {u}");
+    }
+    s.push_str("build parameters:\n");
+    s.push_str(&fitted_line("spring_rate_scale", "", &d.spring_rate_scale));
+    s.push_str(&fitted_line(
+        "preload_offset_mm",
+        "mm",
+        &d.preload_offset_mm,
+    ));
+    s.push_str(&fitted_line("friction", "", &d.friction));
+    s.push_str(&fitted_line("zero_offset_mm", "mm", &d.zero_offset_mm));
+    let _ = writeln!(
+        s,
+        "dynamics taken out: m {:.4} N s^2/mm, d0 {:.3} +- {:.3} N, d1 {:.4} N s/mm, d2 {:.3e} N s^3/mm^3",
+        d.m_n_s2_per_mm, d.d0_n[0], d.d0_n[1], d.d1_n_s_per_mm, d.d2_n_s3_per_mm3
+    );
+    let _ = writeln!(
+        s,
+        "fit: {} samples, window {:.2} s (smallest reduced chi-square of {} tried), reduced chi-square {:.2}",
+        d.samples,
+        d.sg_window_s,
+        d.windows_tried.len(),
+        d.reduced_chi2
+    );
+    s
+}
+
+/// `camspring revise` as text.
+pub fn format_revision(r: &crate::verdict::revise::Revision) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "as built, the force misses the law by up to {:.2} % ({:.2} % RMS) on the corrected stroke; tolerance {:.2} %",
+        r.error_as_built_max_percent, r.error_as_built_rms_percent, r.tolerance_percent
+    );
+    for (i, o) in r.options.iter().enumerate() {
+        let mark = if Some(i) == r.chosen {
+            "CHOSEN"
+        } else if o.passes {
+            "passes"
+        } else {
+            "no"
+        };
+        let _ = writeln!(
+            s,
+            "  [{mark}] {}: {}\n      predicted force error after: {:.2} % largest, {:.2} % RMS; checks: {}",
+            o.kind.name(),
+            o.change,
+            o.predicted_error_max_percent,
+            o.predicted_error_rms_percent,
+            o.checks
+                .iter()
+                .map(|c| format!("{} {}", c.name, c.status.as_str()))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+        if let Some(w) = &o.why_not {
+            let _ = writeln!(s, "      why not: {w}");
+        }
+    }
+    match (&r.refusal, r.chosen()) {
+        (Some(why), _) => {
+            let _ = writeln!(s, "REFUSED: {why}");
+        }
+        (None, Some(o)) => {
+            let _ = writeln!(s, "revision {}: {}", r.revision, o.change);
+        }
+        _ => {}
+    }
+    s
 }

@@ -413,6 +413,7 @@ pub fn validation_html(
     validation_svg: &str,
     log_name: &str,
     force_svg: &str,
+    diagnosis_html: &str,
 ) -> String {
     let mut h = String::with_capacity(128 * 1024);
     let verdict = if v.pass { "PASS" } else { "FAIL" };
@@ -454,6 +455,7 @@ pub fn validation_html(
          averaged in bins of deflection) over the designed law across the whole stroke, with the \
          band of builds that the spec's tolerances allow.",
     ));
+    h.push_str(diagnosis_html);
     h.push_str("</body></html>\n");
     h
 }
@@ -487,6 +489,7 @@ pub fn curve_validation_html(
     v: &crate::verdict::validate::CurveValidation,
     validation_svg: &str,
     log_name: &str,
+    diagnosis_html: &str,
 ) -> String {
     let mut h = String::with_capacity(64 * 1024);
     let verdict = if v.pass { "PASS" } else { "FAIL" };
@@ -519,6 +522,59 @@ pub fn curve_validation_html(
          Right: the relative deviation per bin and the tolerance.",
     ));
     coverage_paragraph(&mut h, v.coverage.as_ref(), v.position_offset_mm);
+    h.push_str(diagnosis_html);
     h.push_str("</body></html>\n");
+    h
+}
+
+/// The diagnosis as a section of validation.html: what the build got wrong, the fitted
+/// build parameters, and the measured, designed and re-fitted curves.
+pub fn diagnosis_section(d: &crate::verdict::diagnose::Diagnosis, svg: &str) -> String {
+    let mut h = String::new();
+    let _ = write!(
+        h,
+        "<h2>Diagnosis: what the build got wrong</h2>\n<p>The measured force (dynamics taken out, \
+         loading and unloading apart) misses the design's forward model by {:.2} % RMS; with the \
+         build parameters fitted, {:.2} % is left unexplained (reduced chi-square {:.2}).</p>\n<ul>\n",
+        d.force_error_before_percent, d.force_error_after_percent, d.reduced_chi2
+    );
+    if d.findings.is_empty() {
+        h.push_str("<li>No build parameter is off its design beyond its uncertainty.</li>\n");
+    }
+    for f in &d.findings {
+        let _ = writeln!(h, "<li>{}</li>", escape(f));
+    }
+    for u in &d.unresolved {
+        let _ = writeln!(h, "<li>Not resolved: {}</li>", escape(u));
+    }
+    h.push_str(
+        "</ul>\n<table><tr><th>build parameter</th><th>fitted</th><th>&plusmn; 1 sigma</th>\
+         <th>designed</th><th>state</th></tr>\n",
+    );
+    for (name, f) in [
+        ("spring rate / designed", &d.spring_rate_scale),
+        ("preload offset (mm)", &d.preload_offset_mm),
+        ("contact friction", &d.friction),
+        ("encoder zero (mm)", &d.zero_offset_mm),
+    ] {
+        let state = if f.fixed {
+            "given"
+        } else if f.resolved {
+            "resolved"
+        } else {
+            "not resolved"
+        };
+        let _ = writeln!(
+            h,
+            "<tr><td>{name}</td><td>{:.4}</td><td>{:.4}</td><td>{:.4}</td><td>{state}</td></tr>",
+            f.value, f.std, f.designed
+        );
+    }
+    h.push_str("</table>\n");
+    h.push_str(&figure(
+        svg,
+        "The measured quasi-static force on each stroke (dots), the design's forward model as \
+         designed (dashed) and with the fitted build (lines), against the logged deflection.",
+    ));
     h
 }

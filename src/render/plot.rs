@@ -231,7 +231,7 @@ pub fn render_panel(panel: &Panel, x0: f64, y0: f64, w: f64, h: f64) -> Group {
                     Circle::new()
                         .set("cx", format!("{:.2}", px(x)))
                         .set("cy", format!("{:.2}", py(y)))
-                        .set("r", 1.6)
+                        .set("r", 2.4)
                         .set("fill", s.color),
                 );
             }
@@ -258,17 +258,28 @@ pub fn render_panel(panel: &Panel, x0: f64, y0: f64, w: f64, h: f64) -> Group {
         }
         let ly = y0 + top + 14.0 + 16.0 * legend_row as f64;
         legend_row += 1;
-        let mut key = Line::new()
-            .set("x1", x0 + left + 10.0)
-            .set("x2", x0 + left + 34.0)
-            .set("y1", ly - 4.0)
-            .set("y2", ly - 4.0)
-            .set("stroke", s.color)
-            .set("stroke-width", 2);
-        if s.dashed {
-            key = key.set("stroke-dasharray", "6,4");
+        if s.dots {
+            g = g.add(
+                Circle::new()
+                    .set("cx", x0 + left + 22.0)
+                    .set("cy", ly - 4.0)
+                    .set("r", 3)
+                    .set("fill", s.color),
+            );
+        } else {
+            let mut key = Line::new()
+                .set("x1", x0 + left + 10.0)
+                .set("x2", x0 + left + 34.0)
+                .set("y1", ly - 4.0)
+                .set("y2", ly - 4.0)
+                .set("stroke", s.color)
+                .set("stroke-width", 2);
+            if s.dashed {
+                key = key.set("stroke-dasharray", "6,4");
+            }
+            g = g.add(key);
         }
-        g = g.add(key).add(
+        g = g.add(
             Text::new(s.label.clone())
                 .set("x", x0 + left + 40.0)
                 .set("y", ly),

@@ -125,6 +125,9 @@ pub struct Validation {
     pub criteria: Vec<Criterion>,
     /// The designed law.
     pub designed: ExpLaw,
+    /// The exponents of the designed build over the logged range, which the EKF's k2 and
+    /// stiffness line are judged against ([`build_exponents`]; set by the application).
+    pub exponents: Option<BuildExponents>,
     /// The identified law (offline).
     pub identified: ExpLaw,
     /// The EKF's final k2 (1/mm); identification's when the EKF was not consistent.
@@ -143,6 +146,9 @@ pub struct Validation {
     pub position_offset_mm: Option<f64>,
     /// What part of the designed stroke the log covers (set with [`coverage`]).
     pub coverage: Option<Coverage>,
+    /// The build's diagnosis, whose stroke-by-stroke curves judge the force
+    /// ([`stroke_criteria`]; set by the application).
+    pub diagnosis: Option<crate::verdict::diagnose::Diagnosis>,
 }
 
 /// Compares a log's identification and EKF run with the designed law. With a `band`, the
@@ -266,6 +272,7 @@ pub fn validate_with(
         pass: criteria.iter().all(|c| c.pass),
         criteria,
         designed: *designed,
+        exponents: None,
         identified,
         ekf_k2_per_mm: k2,
         ekf_k2_per_mm_std: k2_std,
@@ -275,6 +282,7 @@ pub fn validate_with(
         band_exits,
         position_offset_mm: None,
         coverage: None,
+        diagnosis: None,
     }
 }
 
@@ -320,6 +328,9 @@ pub struct CurveValidation {
     pub position_offset_mm: Option<f64>,
     /// What part of the designed stroke the log covers (set with [`coverage`]).
     pub coverage: Option<Coverage>,
+    /// The build's diagnosis, whose stroke-by-stroke curves judge the force
+    /// ([`stroke_criteria`]; set by the application).
+    pub diagnosis: Option<crate::verdict::diagnose::Diagnosis>,
 }
 
 /// Bins of the quasi-static curve over the measured range.
@@ -476,6 +487,7 @@ pub fn validate_curve(
         band_exits,
         position_offset_mm: None,
         coverage: None,
+        diagnosis: None,
     }
 }
 
@@ -571,4 +583,257 @@ pub fn coverage(
             warnings,
         },
     )
+}
+
+/// The force criteria judged on the stroke the design corrects, from a diagnosis's binned
+/// quasi-static curves (inertia, damping and outside Coulomb friction fitted and taken out
+/// with the build free, loading and unloading apart).
+///
+/// A cam with contact friction pulls harder on loading than on unloading by a hysteresis
+/// that grows with the force; the identified exponential law (one curve plus a constant
+/// Coulomb term) lies between the two strokes and is not what the design made follow the
+/// law. So the force is judged stroke by stroke:
+///
+/// - with a flat `tolerance` (`band` None): `force_rms` and `force_max`, the relative
+///   deviation from the law of the corrected stroke (loading, unloading, or the mean of the
+///   two for a midline or uncorrected design);
+/// - against the band of builds: `force_band`, each stroke's bins against that stroke's band.
+pub fn stroke_criteria(
+    d: &crate::verdict::diagnose::Diagnosis,
+    law: &ForceLaw,
+    correction: crate::model::FrictionCorrection,
+    tolerance: f64,
+    band: Option<&ForceBand>,
+) -> (Vec<Criterion>, Vec<BandExit>) {
+    use crate::model::FrictionCorrection as C;
+    let tol = 100.0 * tolerance;
+    match band {
+        None => {
+            // The corrected stroke's curve at each bin.
+            let side = |loading: bool| d.bins.iter().filter(move |b| b.loading == loading);
+            let points: Vec<(f64, f64)> = match correction {
+                C::Loading => side(true).map(|b| (b.x_mm, b.measured_n)).collect(),
+                C::Unloading => side(false).map(|b| (b.x_mm, b.measured_n)).collect(),
+                C::Midline | C::None => side(true)
+                    .filter_map(|l| {
+                        side(false)
+                            .min_by(|a, b| {
+                                (a.x_mm - l.x_mm).abs().total_cmp(&(b.x_mm - l.x_mm).abs())
+                            })
+                            .filter(|u| (u.x_mm - l.x_mm).abs() < 0.05 * l.x_mm.abs().max(1.0))
+                            .map(|u| (0.5 * (l.x_mm + u.x_mm), 0.5 * (l.measured_n + u.measured_n)))
+                    })
+                    .collect(),
+            };
+            let (mut sq, mut dsq, mut max) = (0.0_f64, 0.0_f64, 0.0_f64);
+            for &(x, f) in &points {
+                let target = law.force_n(x);
+                sq += (f - target).powi(2);
+                dsq += target * target;
+                max = max.max(((f - target) / target).abs());
+            }
+            let (rms_what, max_what) = match correction {
+                C::Loading => (
+                    "RMS of the measured quasi-static force on the corrected stroke (loading) against the law over the measured range",
+                    "largest relative deviation of the measured quasi-static force on the corrected stroke (loading) from the law",
+                ),
+                C::Unloading => (
+                    "RMS of the measured quasi-static force on the corrected stroke (unloading) against the law over the measured range",
+                    "largest relative deviation of the measured quasi-static force on the corrected stroke (unloading) from the law",
+                ),
+                C::Midline | C::None => (
+                    "RMS of the mean of the measured loading and unloading quasi-static forces against the law over the measured range",
+                    "largest relative deviation of the mean of the measured loading and unloading quasi-static forces from the law",
+                ),
+            };
+            let mk = |name, what: &'static str, deviation: f64| Criterion {
+                name,
+                what,
+                deviation_percent: deviation,
+                tolerance_percent: tol,
+                pass: !points.is_empty() && deviation.is_finite() && deviation <= tol,
+            };
+            (
+                vec![
+                    mk("force_rms", rms_what, 100.0 * (sq / dsq.max(1e-300)).sqrt()),
+                    mk("force_max", max_what, 100.0 * max),
+                ],
+                Vec::new(),
+            )
+        }
+        Some(b) => {
+            let mut exits: Vec<BandExit> = Vec::new();
+            let mut worst = 0.0_f64;
+            for bin in &d.bins {
+                // The band's stations bracketing the bin, linearly.
+                let j = b
+                    .x_mm
+                    .partition_point(|&x| x < bin.x_mm)
+                    .clamp(1, b.x_mm.len().max(2) - 1);
+                let (Some(&xa), Some(&xb)) = (b.x_mm.get(j - 1), b.x_mm.get(j)) else {
+                    continue;
+                };
+                if bin.x_mm < b.x_mm[0] || bin.x_mm > b.x_mm[b.x_mm.len() - 1] {
+                    continue;
+                }
+                let t = ((bin.x_mm - xa) / (xb - xa).max(1e-12)).clamp(0.0, 1.0);
+                let lerp = |a: f64, c: f64| a + t * (c - a);
+                let (lo, hi) = if bin.loading {
+                    match (
+                        b.loading_lo_n[j - 1],
+                        b.loading_lo_n[j],
+                        b.loading_hi_n[j - 1],
+                        b.loading_hi_n[j],
+                    ) {
+                        (Some(l0), Some(l1), Some(h0), Some(h1)) => (lerp(l0, l1), lerp(h0, h1)),
+                        _ => continue,
+                    }
+                } else {
+                    (
+                        lerp(b.unloading_lo_n[j - 1], b.unloading_lo_n[j]),
+                        lerp(b.unloading_hi_n[j - 1], b.unloading_hi_n[j]),
+                    )
+                };
+                let f = bin.measured_n;
+                let (side, beyond, edge) = if f > hi {
+                    ("above", f - hi, hi)
+                } else if f < lo {
+                    ("below", lo - f, lo)
+                } else {
+                    continue;
+                };
+                worst = worst.max(beyond / edge.abs().max(1e-9));
+                match exits.last_mut() {
+                    Some(e) if e.side == side && bin.x_mm >= e.to_mm => {
+                        e.to_mm = bin.x_mm;
+                        e.worst_n = e.worst_n.max(beyond);
+                    }
+                    _ => exits.push(BandExit {
+                        from_mm: bin.x_mm,
+                        to_mm: bin.x_mm,
+                        side,
+                        worst_n: beyond,
+                    }),
+                }
+            }
+            (
+                vec![Criterion {
+                    name: "force_band",
+                    what: "the measured quasi-static force, loading and unloading apart, against each stroke's 95 % band of builds within the spec's tolerances (largest excursion beyond it)",
+                    deviation_percent: 100.0 * worst,
+                    tolerance_percent: 0.0,
+                    pass: !d.bins.is_empty() && exits.is_empty(),
+                }],
+                exits,
+            )
+        }
+    }
+}
+
+/// What identification and the EKF should find on the spring built exactly as `design` says
+/// (its `[assembly]` included), over the logged deflections.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct BuildExponents {
+    /// The exponential law of the mean of the loading and unloading curves: their model takes
+    /// half the difference as Coulomb friction. The stiffness line is judged against it.
+    pub mean: ExpLaw,
+    /// The exponent of the loading curve alone (1/mm).
+    pub loading_k2_per_mm: f64,
+    /// The exponent of the unloading curve alone (1/mm).
+    pub unloading_k2_per_mm: f64,
+}
+
+impl BuildExponents {
+    /// How far `k2` lies outside the exponents a log of this build can show, beyond two of
+    /// its own standard deviations `k2_std`, relative to the mean's exponent (percent): a log
+    /// that dwells on one stroke (holds after loading, say) weighs that stroke more, so any k2
+    /// between the loading and unloading exponents is the build's; and an estimate is judged
+    /// by its error against its uncertainty (an EKF's is tiny; identification's grows where
+    /// its constant Coulomb term cannot follow a friction that scales with the force).
+    pub fn k2_deviation_percent(&self, k2: f64, k2_std: f64) -> f64 {
+        let lo = self.loading_k2_per_mm.min(self.unloading_k2_per_mm);
+        let hi = self.loading_k2_per_mm.max(self.unloading_k2_per_mm);
+        let allowance = if k2_std.is_finite() {
+            2.0 * k2_std
+        } else {
+            0.0
+        };
+        100.0 * ((k2 - hi).max(lo - k2) - allowance).max(0.0) / self.mean.k2_per_mm
+    }
+}
+
+/// The [`BuildExponents`] of the spring built as `design` says, over `lo_mm ..= hi_mm`. With
+/// contact friction the design makes its corrected stroke (the loading one by default) follow
+/// the law; the other stroke, and so the mean, has another exponent. None for a law that is
+/// not exponential, or a stroke the build cannot load.
+pub fn build_exponents(
+    design: &crate::design::Design,
+    lo_mm: f64,
+    hi_mm: f64,
+) -> Option<BuildExponents> {
+    use crate::cam::tolerance::build_force_at;
+    let designed = *design.law.exponential()?;
+    let build = crate::verdict::diagnose::AsBuilt::assembled(&design.spec).build();
+    const STATIONS: usize = 101;
+    let (lo, hi) = (lo_mm.max(0.0), hi_mm.min(design.xmax_mm()));
+    if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater) {
+        return None;
+    }
+    let mut curves: [Vec<(f64, f64)>; 3] = Default::default();
+    for j in 0..STATIONS {
+        let x = lo + (hi - lo) * j as f64 / (STATIONS - 1) as f64;
+        let (l, u) = build_force_at(&design.pitch_curve, &design.spec.follower, &build, x);
+        let l = l?;
+        curves[0].push((x, 0.5 * (l + u)));
+        curves[1].push((x, l));
+        curves[2].push((x, u));
+    }
+    let [mean, loading, unloading] = curves.map(|c| exponential_fit(&c, designed.k2_per_mm));
+    Some(BuildExponents {
+        mean: mean?,
+        loading_k2_per_mm: loading?.k2_per_mm,
+        unloading_k2_per_mm: unloading?.k2_per_mm,
+    })
+}
+
+/// The least-squares fit of F = mu e^(k2 x) + F0 to `points`, relative errors weighed alike:
+/// linear in (mu, F0) for each k2, golden-section search for k2 within a factor of two of
+/// `k2_start`.
+fn exponential_fit(points: &[(f64, f64)], k2_start: f64) -> Option<ExpLaw> {
+    let fit = |k: f64| {
+        let (mut s11, mut s12, mut s22, mut b1, mut b2) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for &(x, f) in points {
+            let (e, w) = ((k * x).exp(), 1.0 / (f * f).max(1e-300));
+            s11 += w * e * e;
+            s12 += w * e;
+            s22 += w;
+            b1 += w * e * f;
+            b2 += w * f;
+        }
+        let det = s11 * s22 - s12 * s12;
+        let a = (b1 * s22 - b2 * s12) / det;
+        let c = (s11 * b2 - s12 * b1) / det;
+        let residual: f64 = points
+            .iter()
+            .map(|&(x, f)| ((a * (k * x).exp() + c - f) / f).powi(2))
+            .sum();
+        (residual, a, c)
+    };
+    let (mut a, mut b) = (0.5 * k2_start, 2.0 * k2_start);
+    let g = 0.5 * (5f64.sqrt() - 1.0);
+    for _ in 0..80 {
+        let (c, d) = (b - g * (b - a), a + g * (b - a));
+        if fit(c).0 < fit(d).0 {
+            b = d;
+        } else {
+            a = c;
+        }
+    }
+    let k = 0.5 * (a + b);
+    let (_, mu, f0) = fit(k);
+    (mu.is_finite() && f0.is_finite()).then_some(ExpLaw {
+        mu_n: mu,
+        k2_per_mm: k,
+        f0_n: f0,
+    })
 }

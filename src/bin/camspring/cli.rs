@@ -179,6 +179,8 @@ pub enum Command {
         /// Position noise variance in mm^2 (the paper's 0.01).
         #[arg(long, default_value_t = 0.01, allow_hyphen_values = true)]
         position_variance: f64,
+        #[command(flatten)]
+        built: BuiltArgs,
     },
     /// Sensor noise of a log recorded at rest: Allan variance of each channel, and allan.svg.
     ///
@@ -271,6 +273,62 @@ pub enum Command {
         #[command(flatten)]
         calibration: CalibrationArgs,
     },
+    /// Explain a built spring's calibration log with the design's own forward model: which
+    /// build parameters (spring rate, preload, contact friction, encoder zero) are off, and by
+    /// how much.
+    ///
+    /// Writes diagnosis.svg (measured, designed and re-fitted force curves) next to the log.
+    /// The encoder zero is taken as logged unless given (--position-offset 0.3mm) or fitted
+    /// (--position-offset auto; on an exponential law it trades against the spring rate).
+    ///
+    /// Examples:
+    ///   camspring diagnose specs/paper.toml out/paper/calib.csv
+    ///   camspring diagnose specs/paper.toml calib.csv --json
+    ///   camspring diagnose specs/paper.toml calib.csv --position-offset auto
+    #[command(verbatim_doc_comment)]
+    Diagnose {
+        /// Spec file (TOML) of the design.
+        spec: PathBuf,
+        /// Calibration log (CSV with a header).
+        log: PathBuf,
+        /// Plot to write (default diagnosis.svg next to the log).
+        #[arg(long)]
+        svg: Option<PathBuf>,
+        /// Print the diagnosis as JSON on stdout.
+        #[arg(long)]
+        json: bool,
+        #[command(flatten)]
+        build: BuildFitArgs,
+    },
+    /// Write a revision of the design that meets the original law with the parts as built.
+    ///
+    /// Tries, cheapest first: a new preload (shim) with the existing cam and springs, a
+    /// catalogue spring (follower.spring_catalogue), a cam re-cut for the parts as built. Each
+    /// option is given with its predicted force error and every design check; the first that
+    /// passes is written as <name>-<revision>.toml with its note, plus the whole output set
+    /// (CAD, G-code, report) for a re-cut. Exit code 0 revised, 1 refused, 2 bad input.
+    ///
+    /// Examples:
+    ///   camspring revise specs/paper.toml out/paper/calib.csv -o out/paper-B
+    ///   camspring revise specs/paper.toml calib.csv -o rev --tolerance 1% --json
+    #[command(verbatim_doc_comment)]
+    Revise {
+        /// Spec file (TOML) of the design.
+        spec: PathBuf,
+        /// Calibration log (CSV with a header).
+        log: PathBuf,
+        /// Folder to write the revision to.
+        #[arg(short, long)]
+        out: PathBuf,
+        /// Largest relative force error the revised build may have on the stroke, e.g. 2%.
+        #[arg(long, default_value = "3%", value_parser = fraction)]
+        tolerance: f64,
+        /// Print the revision as JSON on stdout.
+        #[arg(long)]
+        json: bool,
+        #[command(flatten)]
+        build: BuildFitArgs,
+    },
     /// Print a shell completion script.
     ///
     /// Examples:
@@ -359,6 +417,41 @@ impl From<DiscretizationArg> for Discretization {
             DiscretizationArg::Euler => Discretization::Euler,
         }
     }
+}
+
+/// A build off its design, for `simulate`: any of these simulates the design's own cam
+/// through its forward model, with loading and unloading curves apart by the contact friction.
+#[derive(clap::Args, Debug, Default)]
+pub struct BuiltArgs {
+    /// The built springs' rate over the designed rate, e.g. 1.12 for springs 12 % stiffer.
+    #[arg(long, value_name = "FACTOR")]
+    pub built_rate_scale: Option<f64>,
+    /// Preload as assembled minus the designed preload, as follower travel, e.g. -0.3mm.
+    #[arg(long, value_name = "LENGTH", value_parser = length, allow_hyphen_values = true)]
+    pub built_preload_offset: Option<f64>,
+    /// The build's contact friction coefficient (default: the design's).
+    #[arg(long, value_name = "COEFFICIENT")]
+    pub built_friction: Option<f64>,
+    /// The rig's encoder reads the deflection plus this, e.g. 0.5mm.
+    #[arg(long, value_name = "LENGTH", value_parser = length, allow_hyphen_values = true)]
+    pub built_zero_offset: Option<f64>,
+}
+
+fn length(text: &str) -> Result<f64, String> {
+    camspring::units::parse_quantity(text.trim(), camspring::units::Dimension::Length)
+        .map_err(|e| format!("\"{text}\": expected a length such as 0.5mm ({e})"))
+}
+
+/// What `diagnose` and `revise` read: the sensors, the log's columns and the encoder zero.
+#[derive(clap::Args, Debug)]
+pub struct BuildFitArgs {
+    /// Encoder zero: none (as logged), a length such as 0.3mm (subtracted), or auto (fitted).
+    #[arg(long, value_name = "auto|LENGTH", default_value = "none", value_parser = position_offset)]
+    pub position_offset: PositionOffset,
+    #[command(flatten)]
+    pub sensors: Sensors,
+    #[command(flatten)]
+    pub columns: Columns,
 }
 
 /// What estimation and validation read: the filter, the sensors and the log's columns.

@@ -15,9 +15,10 @@ use clap::{CommandFactory, Parser};
 use serde_json::json;
 
 use camspring::app::{
-    self, load_noise_json, parse_state_override, run_design, run_estimate, run_identify, run_noise,
-    run_simulate, run_sweep, run_validate, InitSource, SimulateOptions, Verdict, EXIT_BAD_INPUT,
-    EXIT_CHECK_FAILED, EXIT_IO, EXIT_OK,
+    self, load_noise_json, parse_state_override, run_design, run_diagnose, run_estimate,
+    run_identify, run_noise, run_revise, run_simulate, run_sweep, run_validate, BuildChange,
+    DiagnoseOptions, InitSource, SimulateOptions, Verdict, EXIT_BAD_INPUT, EXIT_CHECK_FAILED,
+    EXIT_IO, EXIT_OK, REVISION_JSON,
 };
 use camspring::cam::checks::Status;
 use camspring::estimate::identify::FitStatus;
@@ -25,14 +26,15 @@ use camspring::estimate::log::{parse_column, parse_time_column, ColumnMap};
 use camspring::estimate::sim::{Dynamics, Noise, SimSettings};
 use camspring::export::ExportError;
 use camspring::render::calibration::{
-    estimate_json, format_consistency, format_curve_validation, format_estimate,
-    format_identification, format_noise, format_validation, identification_json, noise_json,
+    estimate_json, format_consistency, format_curve_validation, format_diagnosis, format_estimate,
+    format_identification, format_noise, format_revision, format_validation, identification_json,
+    noise_json,
 };
 use camspring::render::design::format_design;
 use camspring::units::Dimension;
 use camspring::{Error, EstimateOptions, SensorNoise};
 
-use cli::{CalibrationArgs, Cli, Columns, Command, FilterArgs, Sensors};
+use cli::{BuildFitArgs, CalibrationArgs, Cli, Columns, Command, FilterArgs, Sensors};
 
 /// What a command has to say: its text, its JSON (already encoded, in the field order of its
 /// type) and its exit code.
@@ -216,6 +218,16 @@ fn filter_options(f: &FilterArgs, s: &Sensors) -> Result<EstimateOptions, Error>
 }
 
 /// The column map, sampling tolerance and estimation options of `estimate` and `validate`.
+fn diagnose_options(b: &BuildFitArgs) -> Result<DiagnoseOptions, Error> {
+    Ok(DiagnoseOptions {
+        map: columns(&b.columns)?,
+        sampling_tolerance: b.columns.sampling_tolerance,
+        noise: sensors(&b.sensors)?,
+        window_s: b.sensors.window,
+        zero: b.position_offset,
+    })
+}
+
 fn calibration_options(c: &CalibrationArgs) -> Result<(ColumnMap, f64, EstimateOptions), Error> {
     Ok((
         columns(&c.columns)?,
@@ -417,7 +429,14 @@ fn main() -> ExitCode {
             d2,
             force_variance,
             position_variance,
+            built,
         } => {
+            let change = BuildChange {
+                rate_scale: built.built_rate_scale,
+                preload_offset_mm: built.built_preload_offset,
+                friction: built.built_friction,
+                zero_offset_mm: built.built_zero_offset,
+            };
             let settings = SimSettings {
                 profile: profile.into(),
                 duration_s: duration,
@@ -439,6 +458,7 @@ fn main() -> ExitCode {
                 settings,
                 log_path: out,
                 truth_path: truth,
+                build: (change != BuildChange::default()).then_some(change),
             };
             emit(
                 run_simulate(spec.as_deref(), &opts).and_then(|run| {
@@ -449,8 +469,14 @@ fn main() -> ExitCode {
                         ),
                         None => run.law.describe(),
                     };
+                    let built = run.as_built.map_or(String::new(), |b| {
+                        format!(
+                            " built off the design (springs x{:.4}, preload {:+.3} mm, friction {:.4}, encoder zero {:+.3} mm)",
+                            b.spring_rate_scale, b.preload_offset_mm, b.friction, b.zero_offset_mm
+                        )
+                    });
                     let text = format!(
-                        "simulated {} samples of {law}\n  log:   {}\n  truth: {}\n",
+                        "simulated {} samples of {law}{built}\n  log:   {}\n  truth: {}\n",
                         run.samples,
                         run.log_path.display(),
                         run.truth_path.display()
@@ -460,6 +486,7 @@ fn main() -> ExitCode {
                         "truth": run.truth_path,
                         "samples": run.samples,
                         "law": run.law,
+                        "as_built": run.as_built,
                     });
                     Ok(Report::new(text, to_json(&json)?))
                 }),
@@ -567,6 +594,60 @@ fn main() -> ExitCode {
                 };
                 let text = format!("{verdict}  plot: {}\n", path.display());
                 Ok(Report::of_checks(text, to_json(&v)?, code))
+            })(),
+            json,
+        ),
+        Command::Diagnose {
+            spec,
+            log,
+            svg,
+            json,
+            build,
+        } => emit(
+            (|| {
+                let opts = diagnose_options(&build)?;
+                let run = run_diagnose(&spec, &log, &opts, svg.as_deref())?;
+                let text = format!(
+                    "{}  plot: {}\n",
+                    format_diagnosis(&run.diagnosis),
+                    run.svg_path.display()
+                );
+                Ok(Report::new(text, to_json(&run.diagnosis)?))
+            })(),
+            json,
+        ),
+        Command::Revise {
+            spec,
+            log,
+            out,
+            tolerance,
+            json,
+            build,
+        } => emit(
+            (|| {
+                let opts = diagnose_options(&build)?;
+                let run = run_revise(&spec, &log, &opts, tolerance, &out)?;
+                let code = if run.revision.chosen.is_some() {
+                    EXIT_OK
+                } else {
+                    EXIT_CHECK_FAILED
+                };
+                let text = format!(
+                    "{}{}  written: {}\n",
+                    format_diagnosis(&run.diagnosis),
+                    format_revision(&run.revision),
+                    run.spec_path
+                        .as_ref()
+                        .map_or(run.out_dir.join(REVISION_JSON), |p| p.clone())
+                        .display()
+                );
+                let json = json!({
+                    "diagnosis": run.diagnosis,
+                    "revision": run.revision,
+                    "spec": run.spec_path,
+                    "written": run.written,
+                });
+                Ok(Report::of_checks(text, to_json(&json)?, code))
             })(),
             json,
         ),
