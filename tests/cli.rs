@@ -721,3 +721,149 @@ fn help_has_examples_for_every_command() {
         );
     }
 }
+
+#[test]
+fn simulate_a_build_off_its_design_then_diagnose_and_revise_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let spec = spec_path("paper.toml");
+    // Springs 12 % stiff, 0.3 mm short of preload, three times the friction.
+    let out = camspring(
+        d,
+        &[
+            "simulate",
+            spec.as_str(),
+            "-o",
+            "built.csv",
+            "--built-rate-scale",
+            "1.12",
+            "--built-preload-offset",
+            "-0.3mm",
+            "--built-friction",
+            "0.03",
+        ],
+    );
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let truth: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("built.truth.json")).unwrap()).unwrap();
+    assert_eq!(truth["as_built"]["spring_rate_scale"].as_f64(), Some(1.12));
+
+    let out = camspring(d, &["diagnose", spec.as_str(), "built.csv", "--json"]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let g: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let near = |key: &str, truth: f64, tol: f64| {
+        let v = g[key]["value"].as_f64().unwrap();
+        assert!((v - truth).abs() <= tol, "{key}: {v} against {truth}");
+        assert_eq!(g[key]["resolved"], true, "{key}");
+    };
+    near("spring_rate_scale", 1.12, 0.01);
+    near("preload_offset_mm", -0.3, 0.05);
+    near("friction", 0.03, 0.005);
+    assert!(d.join("diagnosis.svg").metadata().unwrap().len() > 1000);
+    assert!(g["force_error_after_percent"].as_f64().unwrap() < 1.0);
+
+    // The text names the deviations in words.
+    let out = camspring(d, &["diagnose", spec.as_str(), "built.csv"]);
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(
+        text.contains("stiffer than designed") && text.contains("short"),
+        "{text}"
+    );
+
+    // A 12 % stiff spring cannot be shimmed to 2 %: the cam is re-cut, with the whole set.
+    let out = camspring(
+        d,
+        &["revise", spec.as_str(), "built.csv", "-o", "revB", "--json"],
+    );
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let r = &v["revision"];
+    assert_eq!(r["revision"], "B");
+    let chosen = r["chosen"].as_u64().unwrap() as usize;
+    assert_eq!(r["options"][chosen]["kind"], "recut-cam");
+    assert_eq!(r["options"][0]["kind"], "shim");
+    assert_eq!(r["options"][0]["passes"], false);
+    for f in [
+        "paper-B.toml",
+        "revision.json",
+        "cam.step",
+        "cam.ngc",
+        "report.html",
+        "drawing.pdf",
+    ] {
+        assert!(d.join("revB").join(f).exists(), "{f}");
+    }
+    let text = std::fs::read_to_string(d.join("revB/paper-B.toml")).unwrap();
+    assert!(
+        text.contains("revision = \"B\"") && text.contains("revision_note"),
+        "{text}"
+    );
+    // The revised spec designs: it is a spec like any other.
+    let out = camspring(d, &["design", "revB/paper-B.toml", "-o", "check"]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
+fn build_flags_and_assembly_keys_out_of_range_are_refused_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let out = camspring(d, &["simulate", "-o", "x.csv", "--built-rate-scale", "0"]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("--built-rate-scale") && err.contains("expected"),
+        "{err}"
+    );
+    let out = camspring(d, &["simulate", "-o", "x.csv", "--built-friction", "1.5"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--built-friction"));
+
+    let spec = std::fs::read_to_string(spec_path("paper.toml")).unwrap();
+    for (table, key, expected) in [
+        (
+            "[assembly]\nshim = \"-50 mm\"\n",
+            "assembly.shim",
+            "at least",
+        ),
+        (
+            "[assembly]\nspring_rate = \"-2 N/mm\"\n",
+            "assembly.spring_rate",
+            "N/mm",
+        ),
+        (
+            "[assembly]\nfriction = 2.0\n",
+            "assembly.friction",
+            "expected",
+        ),
+        ("[assembly]\nwasher = \"1 mm\"\n", "washer", "expected"),
+    ] {
+        std::fs::write(d.join("bad.toml"), format!("{spec}\n{table}")).unwrap();
+        let out = camspring(d, &["design", "bad.toml"]);
+        assert_eq!(out.status.code(), Some(2), "{table}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            err.contains(key) && err.contains(expected),
+            "{table}: {err}"
+        );
+    }
+}
