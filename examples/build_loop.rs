@@ -148,8 +148,12 @@ fn main() {
                         None => ("refused".to_string(), "–".to_string(), "–".to_string()),
                         Some(o) => {
                             let revised_path = dir.join("revised.toml");
-                            let text = camspring::app::revised_spec_text(DEFAULT_SPEC_TOML, o)
-                                .expect("revised spec");
+                            let text = camspring::app::revised_spec_text(
+                                DEFAULT_SPEC_TOML,
+                                o,
+                                std::path::Path::new("."),
+                            )
+                            .expect("revised spec");
                             std::fs::write(&revised_path, text).expect("write spec");
                             let revised =
                                 camspring::design::design(&o.spec).expect("revised design");

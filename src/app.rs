@@ -1119,6 +1119,7 @@ fn toml_string(text: &str) -> String {
 pub fn revised_spec_text(
     original: &str,
     option: &crate::verdict::revise::RevisionOption,
+    base: &Path,
 ) -> Result<String> {
     use crate::verdict::revise::ChangeKind;
     let s = &option.spec;
@@ -1180,7 +1181,7 @@ pub fn revised_spec_text(
         }
     }
     // Read back: the file must say what was judged (rounded as written).
-    let back = crate::spec::parse(&text).map_err(|source| Error::Spec {
+    let back = crate::spec::parse_in(&text, base).map_err(|source| Error::Spec {
         path: "the revised spec".into(),
         source,
     })?;
@@ -1212,6 +1213,72 @@ pub fn revised_spec_text(
         ));
     }
     Ok(text)
+}
+
+/// The spec keys that name files relative to the spec's folder.
+const FILE_KEYS: [(&str, &str); 2] = [("law", "table"), ("follower", "spring_catalogue")];
+
+/// `text` (a spec in `from`) with its file references (`law.table`,
+/// `follower.spring_catalogue`) rewritten for a spec written into `to`: relative paths that
+/// still name the same files.
+pub fn relocate_files(text: &str, from: &Path, to: &Path) -> Result<String> {
+    let value: toml::Value = toml::from_str(text)
+        .map_err(|e| Error::Argument(format!("revise: the revised spec does not parse: {e}")))?;
+    let absolute = |p: &Path| {
+        std::path::absolute(p).map_err(|source| Error::Read {
+            path: p.to_path_buf(),
+            source,
+        })
+    };
+    let (from, to) = (absolute(from)?, absolute(to)?);
+    let mut out = text.to_string();
+    for (table, key) in FILE_KEYS {
+        let Some(name) = value
+            .get(table)
+            .and_then(|t| t.get(key))
+            .and_then(|v| v.as_str())
+        else {
+            continue;
+        };
+        let target = from.join(name);
+        let relative = relative_path(&target, &to);
+        out = set_key(
+            &out,
+            Some(table),
+            key,
+            &toml_string(&relative.to_string_lossy()),
+        );
+    }
+    Ok(out)
+}
+
+/// The path of `target` as seen from the folder `base` (both absolute): up to their common
+/// ancestor, then down.
+fn relative_path(target: &Path, base: &Path) -> PathBuf {
+    use std::path::Component;
+    fn clean(p: &Path) -> Vec<Component<'_>> {
+        let mut v: Vec<Component<'_>> = Vec::new();
+        for c in p.components() {
+            match c {
+                Component::CurDir => {}
+                Component::ParentDir if matches!(v.last(), Some(Component::Normal(_))) => {
+                    v.pop();
+                }
+                c => v.push(c),
+            }
+        }
+        v
+    }
+    let (t, b) = (clean(target), clean(base));
+    let common = t.iter().zip(&b).take_while(|(x, y)| x == y).count();
+    let mut out = PathBuf::new();
+    for _ in common..b.len() {
+        out.push("..");
+    }
+    for c in &t[common..] {
+        out.push(c.as_os_str());
+    }
+    out
 }
 
 /// What `camspring diagnose` found and wrote.
@@ -1339,7 +1406,13 @@ pub fn run_revise(
     let mut spec_name = None;
     if let Some(o) = revision.chosen() {
         let name = format!("{}-{}.toml", spec.name, revision.revision);
-        files.push((name.clone(), revised_spec_text(&original, o)?.into_bytes()));
+        let spec_dir = spec_path
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        let text = revised_spec_text(&original, o, spec_dir)?;
+        let text = relocate_files(&text, spec_dir, out_dir)?;
+        files.push((name.clone(), text.into_bytes()));
         owned.push(name.clone());
         spec_name = Some(name);
         if o.kind == ChangeKind::RecutCam {

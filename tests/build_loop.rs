@@ -299,7 +299,7 @@ fn a_revision_built_from_the_real_parts_passes_validate() {
         assert!(o.predicted_error_max_percent <= 2.0);
         assert_eq!(r.revision, "B");
         // The revised spec as written reads back as the option judged, with its revision.
-        let text = revised_spec_text(DEFAULT_SPEC_TOML, o).unwrap();
+        let text = revised_spec_text(DEFAULT_SPEC_TOML, o, std::path::Path::new(".")).unwrap();
         let back = Spec::from_toml(&text).unwrap();
         assert_eq!(back.revision.as_deref(), Some("B"));
         assert!(back

@@ -867,3 +867,103 @@ fn build_flags_and_assembly_keys_out_of_range_are_refused_by_name() {
         );
     }
 }
+
+#[test]
+fn springs_of_the_wrong_rate_are_swapped_for_a_catalogue_spring_and_the_revision_passes() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let spec = std::fs::read_to_string(spec_path("paper.toml")).unwrap();
+    let spec = spec.replacen(
+        "[follower]\n",
+        "[follower]\nspring_catalogue = \"springs.csv\"\n",
+        1,
+    );
+    std::fs::write(d.join("paper.toml"), spec).unwrap();
+    std::fs::copy(spec_path("springs.csv"), d.join("springs.csv")).unwrap();
+    // The vendor shipped 4.25 N/mm springs for the 5 N/mm design: no shim brings the force
+    // back, the catalogue's 5.05 N/mm spring does.
+    let out = camspring(
+        d,
+        &[
+            "simulate",
+            "paper.toml",
+            "-o",
+            "built.csv",
+            "--built-rate-scale",
+            "0.85",
+            "--seed",
+            "2",
+        ],
+    );
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let out = camspring(
+        d,
+        &["revise", "paper.toml", "built.csv", "-o", "rev/B", "--json"],
+    );
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let r = &v["revision"];
+    let o = &r["options"][r["chosen"].as_u64().unwrap() as usize];
+    assert_eq!(o["kind"], "catalogue-spring", "{r}");
+    assert_eq!(o["spring_part"], "CS-0505");
+    assert!(o["predicted_error_max_percent"].as_f64().unwrap() <= 3.0);
+    // Only the spec and the decision: the cam is kept.
+    assert!(!d.join("rev/B/cam.step").exists());
+    // The revised spec, two folders down, still finds the catalogue; built as it says (the
+    // catalogue spring with the preload as assembled), it passes.
+    let text = std::fs::read_to_string(d.join("rev/B/paper-B.toml")).unwrap();
+    assert!(
+        text.contains("spring_catalogue = \"../../springs.csv\""),
+        "{text}"
+    );
+    assert!(text.contains("spring_part = \"CS-0505\""), "{text}");
+    let out = camspring(
+        d,
+        &[
+            "simulate",
+            "rev/B/paper-B.toml",
+            "-o",
+            "after.csv",
+            "--seed",
+            "9",
+        ],
+    );
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let out = camspring(
+        d,
+        &[
+            "validate",
+            "rev/B/paper-B.toml",
+            "after.csv",
+            "--tolerance",
+            "3%",
+        ],
+    );
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    // The unrevised spec fails the same kind of build.
+    let out = camspring(
+        d,
+        &["validate", "paper.toml", "built.csv", "--tolerance", "3%"],
+    );
+    assert_eq!(out.status.code(), Some(1));
+}
