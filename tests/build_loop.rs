@@ -229,8 +229,10 @@ fn with_the_zero_unknown_the_rate_is_recovered_or_named() {
             "{:?}",
             g.unresolved
         );
-        // The revision refuses to guess.
+        // The revision refuses to guess, and no number is given for it.
         assert!(!camspring::verdict::revise::unresolved_parts(&g).is_empty());
+        let json = serde_json::to_value(&g).unwrap();
+        assert!(json["spring_rate_scale"]["value"].is_null(), "{json}");
     }
     // Friction does not trade with the zero.
     assert!((g.friction.value - 0.03).abs() <= 0.005 && g.friction.resolved);

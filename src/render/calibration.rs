@@ -930,6 +930,13 @@ fn fitted_line(name: &str, unit: &str, f: &crate::verdict::diagnose::Fitted) -> 
     } else {
         "NOT RESOLVED by this log".to_string()
     };
+    if !(f.fixed || f.resolved) {
+        // No number for what the log does not say.
+        return format!(
+            "  {name:<22} {:>21} {unit:<4} designed {:.4}  ({state})\n",
+            "-", f.designed
+        );
+    }
     format!(
         "  {name:<22} {:>10.4} +- {:<8.4}{unit:<4} designed {:.4}  ({state})\n",
         f.value, f.std, f.designed
@@ -983,11 +990,13 @@ pub fn format_diagnosis(d: &crate::verdict::diagnose::Diagnosis) -> String {
 pub fn format_revision(r: &crate::verdict::revise::Revision) -> String {
     use std::fmt::Write as _;
     let mut s = String::new();
-    let _ = writeln!(
-        s,
-        "as built, the force misses the law by up to {:.2} % ({:.2} % RMS) on the corrected stroke; tolerance {:.2} %",
-        r.error_as_built_max_percent, r.error_as_built_rms_percent, r.tolerance_percent
-    );
+    if r.error_as_built_max_percent.is_finite() {
+        let _ = writeln!(
+            s,
+            "as built, the force misses the law by up to {:.2} % ({:.2} % RMS) on the corrected stroke; tolerance {:.2} %",
+            r.error_as_built_max_percent, r.error_as_built_rms_percent, r.tolerance_percent
+        );
+    }
     for (i, o) in r.options.iter().enumerate() {
         let mark = if Some(i) == r.chosen {
             "CHOSEN"

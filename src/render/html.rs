@@ -564,10 +564,16 @@ pub fn diagnosis_section(d: &crate::verdict::diagnose::Diagnosis, svg: &str) -> 
         } else {
             "not resolved"
         };
+        let (value, std) = if f.fixed || f.resolved {
+            (format!("{:.4}", f.value), format!("{:.4}", f.std))
+        } else {
+            // No number for what the log does not say.
+            ("&ndash;".to_string(), "&ndash;".to_string())
+        };
         let _ = writeln!(
             h,
-            "<tr><td>{name}</td><td>{:.4}</td><td>{:.4}</td><td>{:.4}</td><td>{state}</td></tr>",
-            f.value, f.std, f.designed
+            "<tr><td>{name}</td><td>{value}</td><td>{std}</td><td>{:.4}</td><td>{state}</td></tr>",
+            f.designed
         );
     }
     h.push_str("</table>\n");

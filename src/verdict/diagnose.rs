@@ -192,8 +192,9 @@ impl BuildParam {
     }
 }
 
-/// One fitted parameter.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+/// One fitted parameter. In JSON an unresolved parameter's `value` is null: the log does not
+/// say it, and a number would be a guess.
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Fitted {
     /// The fitted value.
     pub value: f64,
@@ -207,6 +208,23 @@ pub struct Fitted {
     pub fixed: bool,
     /// Its correlation with the fitted zero (0 when the zero is not fitted).
     pub zero_correlation: f64,
+}
+
+impl Serialize for Fitted {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeStruct;
+        let mut s = serializer.serialize_struct("Fitted", 6)?;
+        s.serialize_field(
+            "value",
+            &(self.resolved || self.fixed).then_some(self.value),
+        )?;
+        s.serialize_field("std", &self.std)?;
+        s.serialize_field("designed", &self.designed)?;
+        s.serialize_field("resolved", &self.resolved)?;
+        s.serialize_field("fixed", &self.fixed)?;
+        s.serialize_field("zero_correlation", &self.zero_correlation)?;
+        s.end()
+    }
 }
 
 /// One bin of the quasi-static force curve on one stroke.
@@ -960,21 +978,17 @@ fn describe(d: &mut Diagnosis) {
         if !f.resolved {
             unresolved.push(if f.zero_correlation.abs() > MAX_ZERO_CORRELATION {
                 format!(
-                    "{}: {:.4} +- {:.4}, not resolved apart from the encoder zero over this log \
-                     (correlation {:+.3}): give the rig's zero (--position-offset VALUE) or log \
-                     more of the stroke",
+                    "{}: not resolved apart from the encoder zero over this log (correlation \
+                     {:+.3}): give the rig's zero (--position-offset VALUE) or log more of the stroke",
                     param.key(),
-                    f.value,
-                    f.std,
                     f.zero_correlation
                 )
             } else {
                 format!(
-                    "{}: {:.4} +- {:.4}, not resolved by this log (three standard deviations exceed {limit}); \
+                    "{}: not resolved by this log (three standard deviations, {:.4}, exceed {limit}); \
                      a log that covers more of the stroke, loads and unloads, or runs longer resolves it",
                     param.key(),
-                    f.value,
-                    f.std
+                    3.0 * f.std
                 )
             });
             continue;
