@@ -83,6 +83,11 @@ fn log_of(
         .0
 }
 
+/// The diagnosis of `log` at the paper's sensor noise, the window chosen from the data.
+fn diagnosed(d: &Design, log: &camspring::CalibrationLog, zero: PositionOffset) -> Diagnosis {
+    diagnose(d, log, &SensorNoise::default(), None, zero).unwrap()
+}
+
 #[test]
 fn a_built_spring_is_the_geometry_of_its_parts() {
     // Independent construction: the roller-centre path and its slope angle (the synthesis's
@@ -182,14 +187,7 @@ fn diagnose_recovers_the_parts_of_builds_off_the_design() {
                 };
                 let log = log_of(&d, truth, dynamics, profile, seed);
                 // The rig's zero is known (measured at the stop): given.
-                let g = diagnose(
-                    &d,
-                    &log,
-                    &SensorNoise::default(),
-                    None,
-                    PositionOffset::Mm(truth.zero_offset_mm),
-                )
-                .unwrap();
+                let g = diagnosed(&d, &log, PositionOffset::Mm(truth.zero_offset_mm));
                 assert_recovers(
                     &g,
                     truth,
@@ -210,14 +208,7 @@ fn with_the_zero_unknown_the_rate_is_recovered_or_named() {
     let d = default_design();
     let truth = parts(1.1, 0.3, 0.03, 0.2);
     let log = log_of(&d, &truth, Dynamics::light(), Profile::Sines, 4);
-    let g = diagnose(
-        &d,
-        &log,
-        &SensorNoise::default(),
-        None,
-        PositionOffset::Auto,
-    )
-    .unwrap();
+    let g = diagnosed(&d, &log, PositionOffset::Auto);
     assert!(!g.zero_offset_mm.fixed);
     if g.spring_rate_scale.resolved {
         assert!((g.spring_rate_scale.value - 1.1).abs() <= 0.01, "{g:?}");
@@ -287,14 +278,7 @@ fn a_revision_built_from_the_real_parts_passes_validate() {
         let (before, why) = validate_build(dir.path(), "before", DEFAULT_SPEC_TOML, &d, &truth);
         assert!(!before, "the build as it is fails: {why}");
         let log = log_of(&d, &truth, Dynamics::light(), Profile::Sines, 1);
-        let g = diagnose(
-            &d,
-            &log,
-            &SensorNoise::default(),
-            None,
-            PositionOffset::Mm(truth.zero_offset_mm),
-        )
-        .unwrap();
+        let g = diagnosed(&d, &log, PositionOffset::Mm(truth.zero_offset_mm));
         let r = revise(&d, &g, 0.02);
         let o = r.chosen().unwrap_or_else(|| panic!("{:?}", r.refusal));
         assert_eq!(o.kind, kind, "{:?}", r.options);
@@ -323,14 +307,7 @@ fn a_spring_far_too_soft_for_the_law_is_refused_with_the_reason() {
     let d = default_design();
     let truth = parts(0.3, 0.0, 0.01, 0.0);
     let log = log_of(&d, &truth, Dynamics::light(), Profile::Sines, 2);
-    let g = diagnose(
-        &d,
-        &log,
-        &SensorNoise::default(),
-        None,
-        PositionOffset::Mm(0.0),
-    )
-    .unwrap();
+    let g = diagnosed(&d, &log, PositionOffset::Mm(0.0));
     assert!((g.spring_rate_scale.value - 0.3).abs() < 0.01, "{g:?}");
     let r = revise(&d, &g, 0.02);
     assert!(r.chosen.is_none(), "{:?}", r.options);

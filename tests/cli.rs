@@ -821,6 +821,36 @@ fn simulate_a_build_off_its_design_then_diagnose_and_revise_it() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
+    // Built from its parts (both strokes, the friction's hysteresis), the revision passes
+    // against its band of builds, as the text suggests.
+    let out = camspring(d, &["revise", spec.as_str(), "built.csv", "-o", "revB"]);
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(text.contains("--built -o built-B.csv"), "{text}");
+    let out = camspring(
+        d,
+        &[
+            "simulate",
+            "revB/paper-B.toml",
+            "--built",
+            "-o",
+            "built-B.csv",
+            "--seed",
+            "3",
+        ],
+    );
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let out = camspring(d, &["validate", "revB/paper-B.toml", "built-B.csv"]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
 }
 
 #[test]

@@ -132,6 +132,8 @@ pub enum Command {
     ///   camspring simulate specs/paper.toml -o out/paper/calib.csv --truth out/paper/truth.json
     ///   camspring simulate --profile static --duration 600s -o static.csv
     ///   camspring simulate --profile steps --d0 0.2 --seed 7 --rate 1kHz
+    ///   camspring simulate out/paper-B/paper-B.toml --built -o b.csv   # a revision, built from its parts
+    ///   camspring simulate -o off.csv --built-rate-scale 1.12 --built-friction 0.03
     #[command(verbatim_doc_comment)]
     Simulate {
         /// Spec file (TOML); the built-in default spec when omitted.
@@ -423,6 +425,11 @@ impl From<DiscretizationArg> for Discretization {
 /// through its forward model, with loading and unloading curves apart by the contact friction.
 #[derive(clap::Args, Debug, Default)]
 pub struct BuiltArgs {
+    /// Simulate the spring as built from the design's parts: the cam's loading and unloading
+    /// curves through its forward model (the contact friction's hysteresis), not the law
+    /// itself. Implied by any --built-* value and by the spec's [assembly].
+    #[arg(long)]
+    pub built: bool,
     /// The built springs' rate over the designed rate, e.g. 1.12 for springs 12 % stiffer.
     #[arg(long, value_name = "FACTOR")]
     pub built_rate_scale: Option<f64>,

@@ -7,7 +7,7 @@
 mod cli;
 
 use std::io::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::{CommandFactory, Parser};
@@ -458,7 +458,7 @@ fn main() -> ExitCode {
                 settings,
                 log_path: out,
                 truth_path: truth,
-                build: (change != BuildChange::default()).then_some(change),
+                build: (built.built || change != BuildChange::default()).then_some(change),
             };
             emit(
                 run_simulate(spec.as_deref(), &opts).and_then(|run| {
@@ -632,7 +632,7 @@ fn main() -> ExitCode {
                 } else {
                     EXIT_CHECK_FAILED
                 };
-                let text = format!(
+                let mut text = format!(
                     "{}{}  written: {}\n",
                     format_diagnosis(&run.diagnosis),
                     format_revision(&run.revision),
@@ -641,6 +641,17 @@ fn main() -> ExitCode {
                         .map_or(run.out_dir.join(REVISION_JSON), |p| p.clone())
                         .display()
                 );
+                if let Some(p) = &run.spec_path {
+                    // Next to the revision's folder, which holds exactly one run of `revise`.
+                    let log = PathBuf::from(format!("built-{}.csv", run.revision.revision));
+                    text.push_str(&format!(
+                        "  check it on the simulator: camspring simulate {} --built -o {}; camspring validate {} {}\n",
+                        p.display(),
+                        log.display(),
+                        p.display(),
+                        log.display()
+                    ));
+                }
                 let json = json!({
                     "diagnosis": run.diagnosis,
                     "revision": run.revision,
