@@ -254,30 +254,60 @@ fn divergence_stops_with_the_sample_index() {
     assert!(err.contains("diverged at sample 60"), "{err}");
 }
 
+/// The z-scores of the final [M, k2, d2] of one run, and its normalised estimation error
+/// squared e^T P^-1 e over the constants the run estimates (a held state, with no variance,
+/// counts neither in the NEES nor in its degrees of freedom, and its z is NaN).
+fn constants_nees(est: &EstimateRun, truth: [f64; 3]) -> ([f64; 3], f64, usize) {
+    use nalgebra::{DMatrix, DVector};
+    let (z, p) = (est.run.last.z, est.run.last.p);
+    let ids = [idx::M, idx::K2, idx::D2];
+    let free: Vec<usize> = (0..3).filter(|&i| p[(ids[i], ids[i])] > 0.0).collect();
+    let e = DVector::from_fn(free.len(), |a, _| z[ids[free[a]]] - truth[free[a]]);
+    let cov = DMatrix::from_fn(free.len(), free.len(), |a, b| {
+        p[(ids[free[a]], ids[free[b]])]
+    });
+    let nees = cov.cholesky().unwrap().solve(&e).dot(&e);
+    let zs = [0, 1, 2].map(|i| {
+        let var = p[(ids[i], ids[i])];
+        if var > 0.0 {
+            (z[ids[i]] - truth[i]) / var.sqrt()
+        } else {
+            f64::NAN
+        }
+    });
+    (zs, nees, free.len())
+}
+
+/// Asserts that the NEES summed over the runs lies in the 95 % band of chi-square with the
+/// runs' degrees of freedom, as it does when the covariance is right.
+fn assert_nees_in_band(runs: &[([f64; 3], f64, usize)], what: &str) {
+    use statrs::distribution::{ChiSquared, ContinuousCDF};
+    let total: f64 = runs.iter().map(|r| r.1).sum();
+    let dof: usize = runs.iter().map(|r| r.2).sum();
+    let chi = ChiSquared::new(dof as f64).unwrap();
+    let (lo, hi) = (chi.inverse_cdf(0.025), chi.inverse_cdf(0.975));
+    eprintln!("{what}: NEES {total:.1} over {dof} degrees of freedom, band {lo:.1} ... {hi:.1}");
+    assert!(
+        (lo..=hi).contains(&total),
+        "{what}: NEES {total} over {dof} degrees of freedom, band {lo} ... {hi}"
+    );
+}
+
 /// The filter's reported standard deviations of M and k2 match its errors over seeds (the RMS
 /// of the z-scores near 1); d2's do not yet (docs/CALIBRATION.md).
 #[test]
 fn reported_standard_deviations_of_m_k2_and_d2_match_the_errors_over_seeds() {
-    use nalgebra::{DMatrix, DVector};
     use rayon::prelude::*;
-    use statrs::distribution::{ChiSquared, ContinuousCDF};
     let law = common::paper_law();
     let d = heavy();
-    let runs: Vec<([f64; 3], f64)> = (0..12u64)
+    let runs: Vec<([f64; 3], f64, usize)> = (0..12u64)
         .into_par_iter()
         .map(|seed| {
             let (log, _) = sim(&law, Profile::Sines, 300.0, 100 + seed, Noise::default());
             let est =
                 estimate_log(&log, &options(Noise::default(), Discretization::Rk4), false).unwrap();
             assert!(est.consistency.consistent, "{:?}", est.consistency);
-            let (z, p) = (est.run.last.z, est.run.last.p);
-            let ids = [idx::M, idx::K2, idx::D2];
-            let truth = [d.m_n_s2_per_mm, law.k2_per_mm, d.d2_n_s3_per_mm3];
-            let e = DVector::from_fn(3, |i, _| z[ids[i]] - truth[i]);
-            let cov = DMatrix::from_fn(3, 3, |i, j| p[(ids[i], ids[j])]);
-            // Normalised estimation error squared of the three constants.
-            let nees = cov.clone().cholesky().unwrap().solve(&e).dot(&e);
-            ([0, 1, 2].map(|i| e[i] / cov[(i, i)].sqrt()), nees)
+            constants_nees(&est, [d.m_n_s2_per_mm, law.k2_per_mm, d.d2_n_s3_per_mm3])
         })
         .collect();
     for (k, name) in ["M", "k2", "d2"].iter().enumerate() {
@@ -289,17 +319,41 @@ fn reported_standard_deviations_of_m_k2_and_d2_match_the_errors_over_seeds() {
         assert!((0.5..1.6).contains(&rms), "{name}: RMS z {rms}");
         assert!(worst < 3.5, "{name}: worst |z| {worst}");
     }
-    // The mean NEES of 12 runs lies in the 95 % band of chi-square(36) / 12 when the
-    // covariance is right. (Before d2's standard deviation was held to identification's, it was
-    // 8.6 on these runs, d2's errors 2.6 times its claimed standard deviation.)
-    let n = runs.len() as f64;
-    let mean = runs.iter().map(|r| r.1).sum::<f64>() / n;
-    let chi = ChiSquared::new(3.0 * n).unwrap();
-    let (lo, hi) = (chi.inverse_cdf(0.025) / n, chi.inverse_cdf(0.975) / n);
-    assert!(
-        (lo..=hi).contains(&mean),
-        "mean NEES {mean}, band {lo} ... {hi}"
-    );
+    // (Before d2's standard deviation was held to identification's, the mean NEES was 8.6 on
+    // these runs, d2's errors 2.6 times its claimed standard deviation.)
+    assert_nees_in_band(&runs, "sines");
+}
+
+/// On slow ramp-hold runs the filter's M leans high beyond its own standard deviation, where
+/// identification's M does not: with M held only to half the squared disagreement between the
+/// two, the NEES of 12 runs of the default transmission was above its band (4.70 per run
+/// against a top of 4.54). Holding it to all of the disagreement that identification's own
+/// variance does not explain brings it inside.
+#[test]
+fn the_nees_of_slow_ramp_hold_runs_lies_in_its_band() {
+    use rayon::prelude::*;
+    let law = ExpLaw {
+        mu_n: 1.1,
+        k2_per_mm: 0.24,
+        f0_n: 2.0,
+    };
+    let d = Dynamics::default();
+    let runs: Vec<([f64; 3], f64, usize)> = (0..12u64)
+        .into_par_iter()
+        .map(|seed| {
+            let settings = SimSettings {
+                profile: Profile::RampHold,
+                seed,
+                dynamics: d,
+                ..SimSettings::default()
+            };
+            let (log, _) = simulate(law, 15.0, 500.0, &settings).unwrap();
+            let est =
+                estimate_log(&log, &options(Noise::default(), Discretization::Rk4), false).unwrap();
+            constants_nees(&est, [d.m_n_s2_per_mm, law.k2_per_mm, d.d2_n_s3_per_mm3])
+        })
+        .collect();
+    assert_nees_in_band(&runs, "ramp-hold");
 }
 
 /// Rigs log from 100 Hz to kilohertz rates. Identification averages fast logs in blocks down
@@ -366,7 +420,8 @@ fn identification_and_the_filter_hold_from_100_hz_to_2_khz() {
 
 /// A short log: the filter warns that it determines k2 or M less precisely than its target
 /// (k2 within 0.5 %, M within 2 %, at 2 sigma), its errors stay within 3 of its standard
-/// deviations, and a log as many times longer as the warning says reaches the target.
+/// deviations, and a log as many times longer as the warning says brings the filter's own
+/// standard deviations to the target.
 #[test]
 fn estimate_warns_when_the_log_is_too_short_for_its_target_and_says_how_much_longer() {
     use camspring::estimate::pipeline::estimate;
@@ -393,10 +448,22 @@ fn estimate_warns_when_the_log_is_too_short_for_its_target_and_says_how_much_lon
             sd[k]
         );
     }
-    let longest = warned.iter().map(|w| w.2).fold(1.0, f64::max);
+    let longest = warned
+        .iter()
+        .filter_map(|w| w.log_length_factor)
+        .fold(1.0, f64::max);
+    assert!(longest > 1.0, "{warned:?}");
     assert!(longest < 40.0, "{warned:?}");
     let long = run(30.0 * longest * 1.5);
-    assert!(long.imprecise().is_empty(), "{:?}", long.imprecise());
+    // The filter's own standard deviations reach the target. One may still be held above it
+    // by the filter's disagreement with identification, which a longer log shrinks only if it
+    // is random; the warning then says so.
+    let left = long.imprecise();
+    assert!(
+        left.iter()
+            .all(|w| w.log_length_factor.is_none() && w.relative_disagreement.is_some()),
+        "{left:?}"
+    );
 }
 
 /// On a light transmission's ramp-hold runs the force noise dominates the motion's forces, and

@@ -170,6 +170,27 @@ pub struct EstimateRun {
     /// The filter's bias in its constants, measured on twins of the log and taken out of
     /// [`EkfRun::last`] (None: no twins, or no identification to simulate them from).
     pub twins: Option<TwinBias>,
+    /// The final standard deviations before M and d2 were held to their disagreement with
+    /// identification: the part that a longer log of the same kind shrinks as
+    /// 1 / sqrt(duration).
+    pub std_before_disagreement: ekf::State,
+}
+
+/// A constant the filter determines less precisely than [`FILTER_TARGET_PRECISION`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Imprecision {
+    /// The state's name ([`ekf::STATE_NAMES`]).
+    pub state: &'static str,
+    /// Its final relative standard deviation.
+    pub relative_std: f64,
+    /// How many times longer a log of the same kind would have to be for the filter's own
+    /// standard deviation to reach the target (its variance falls as 1 / duration). None when
+    /// that one already does, and the standard deviation is held to the filter's
+    /// disagreement with identification, which a longer log reduces only if it is random.
+    pub log_length_factor: Option<f64>,
+    /// The disagreement with identification, relative to the value, when it holds the
+    /// standard deviation above the filter's own.
+    pub relative_disagreement: Option<f64>,
 }
 
 /// Why the estimation failed.
@@ -197,19 +218,33 @@ pub enum EstimateError {
 
 impl EstimateRun {
     /// The filter's constants (k2, and M when it is estimated) whose two standard deviations
-    /// exceed [`FILTER_TARGET_PRECISION`], each with its state name, relative standard
-    /// deviation and how many times longer a log of the same kind would have to be to reach
-    /// the target (the variance falls as 1 / duration).
-    pub fn imprecise(&self) -> Vec<(&'static str, f64, f64)> {
+    /// exceed [`FILTER_TARGET_PRECISION`].
+    pub fn imprecise(&self) -> Vec<Imprecision> {
+        use super::identify::Param;
         let z = self.run.last.z;
         let sd = self.run.last.std();
         FILTER_TARGET_PRECISION
             .iter()
             .filter(|&&(k, _)| !(self.settings.p0_std[k] == 0.0 && self.settings.q[k] == 0.0))
             .filter_map(|&(k, target)| {
-                let rel = sd[k] / z[k].abs().max(1e-300);
-                (2.0 * rel > target)
-                    .then(|| (ekf::STATE_NAMES[k], rel, (2.0 * rel / target).powi(2)))
+                let scale = z[k].abs().max(1e-300);
+                let rel = sd[k] / scale;
+                if 2.0 * rel <= target {
+                    return None;
+                }
+                let own = self.std_before_disagreement[k] / scale;
+                let held = own < rel;
+                let disagreement = (k == ekf::idx::M)
+                    .then(|| self.identification.as_ref()?.get(Param::M).value)
+                    .flatten()
+                    .filter(|_| held)
+                    .map(|v| (z[k] - v).abs() / scale);
+                Some(Imprecision {
+                    state: ekf::STATE_NAMES[k],
+                    relative_std: rel,
+                    log_length_factor: (2.0 * own > target).then(|| (2.0 * own / target).powi(2)),
+                    relative_disagreement: disagreement,
+                })
             })
             .collect()
     }
@@ -796,6 +831,7 @@ where
         _ => None,
     };
     let consistency = Consistency::new(&run, identification.as_ref(), stiffness_path);
+    let std_before_disagreement = run.last.std();
     if let Some(id) = &identification {
         widen_to_disagreement(&mut run, id);
     }
@@ -807,6 +843,7 @@ where
         consistency,
         position_offset_mm: (offset_mm != 0.0).then_some(offset_mm),
         twins,
+        std_before_disagreement,
     })
 }
 
@@ -1051,28 +1088,28 @@ fn widen_to_identification(run: &mut EkfRun, id: &Identification) {
 }
 
 /// Brings the filter's standard deviations of M and d2 up to their disagreement with
-/// identification of the same log over sqrt(2), where they are below. Two estimates of one
-/// quantity with independent errors differ by d with E[d^2] = s_filter^2 + s_identify^2; the
-/// filter takes at least half of the observed d^2 as its own. On slow ramp-hold runs and on a
-/// heavy transmission's steps the filter's M is biased beyond its own standard deviation
-/// (mean z +2.1 over 12 seeds of the default transmission's ramp-hold, worst -6.8 on heavy
-/// steps) where identification's M is not. With this floor the mean NEES of [M, k2, d2] went
-/// from 10.5 to 4.75 on the first (its band's top is 4.54) and from 21.0 to 3.87 on the
-/// second (docs/CALIBRATION.md). Taking all of d^2 (a floor of d) made it too wide on sines
-/// (mean NEES 1.75 over 12 seeds, below its band); taking only what exceeds identification's
-/// variance left heavy steps at 6.5. It is applied after the consistency check, which compares
-/// the two with their own standard deviations.
+/// identification of the same log, where they are below. Two estimates of one quantity with
+/// independent errors differ by d with E[d^2] = s_filter^2 + s_identify^2; the filter takes as
+/// its own at least half of the observed d^2, and at least all of it that identification's
+/// variance does not explain: sqrt(max(d^2 / 2, d^2 - s_identify^2)). On slow ramp-hold runs
+/// and on a heavy transmission's steps the filter's M is biased beyond its own standard
+/// deviation (mean z +2.1 over 12 seeds of the default transmission's ramp-hold, worst -6.8 on
+/// heavy steps) where identification's M is not. With this floor the mean NEES of [M, k2, d2]
+/// went from 10.5 to 4.25 on the first (band 1.78-4.54; half of d^2 alone left it at 4.70) and
+/// from 21.0 to 3.33 on the second (docs/CALIBRATION.md). Taking all of d^2 (a floor of d) made
+/// it too wide on sines (mean NEES 1.75 over 12 seeds, below its band); taking only what
+/// exceeds identification's variance left heavy steps at 6.5. It is applied after the
+/// consistency check, which compares the two with their own standard deviations; the
+/// standard deviations before it are kept ([`EstimateRun::std_before_disagreement`]).
 fn widen_to_disagreement(run: &mut EkfRun, id: &Identification) {
     use super::identify::Param;
     for (k, p) in [(ekf::idx::M, Param::M), (ekf::idx::D2, Param::D2)] {
         let Some(v) = id.get(p).value else {
             continue;
         };
-        widen(
-            run,
-            k,
-            (run.last.z[k] - v).abs() * std::f64::consts::FRAC_1_SQRT_2,
-        );
+        let d2 = (run.last.z[k] - v).powi(2);
+        let s_id2 = id.get(p).std.map_or(f64::INFINITY, |s| s * s);
+        widen(run, k, (0.5 * d2).max(d2 - s_id2).sqrt());
     }
 }
 

@@ -359,8 +359,10 @@ pub fn estimate_json(est: &EstimateRun) -> Value {
         "first_sample": run.first_sample,
         "outliers": run.outliers,
         "held": held_states(settings),
-        "imprecise": est.imprecise().iter().map(|(state, rel, longer)| json!({
-            "state": state, "relative_std": rel, "log_length_factor_for_target": longer,
+        "imprecise": est.imprecise().iter().map(|w| json!({
+            "state": w.state, "relative_std": w.relative_std,
+            "log_length_factor_for_target": w.log_length_factor,
+            "relative_disagreement_with_identification": w.relative_disagreement,
         })).collect::<Vec<_>>(),
         "recovery": est.recovery,
         "twins": est.twins,
@@ -417,14 +419,27 @@ pub fn format_consistency(est: &EstimateRun) -> String {
             );
         }
     }
-    for (state, rel, longer) in est.imprecise() {
+    for w in est.imprecise() {
+        let mut remedy = match w.log_length_factor {
+            Some(longer) => {
+                format!("needs a log about {longer:.1} times longer, or one with more motion")
+            }
+            None => "is met by the filter's own standard deviation".to_string(),
+        };
+        if let Some(d) = w.relative_disagreement {
+            remedy.push_str(&format!(
+                "; the standard deviation is held to the filter's disagreement with \
+                 identification on it ({:.2} %), which a longer log reduces only if it is \
+                 random, and a log with more motion (sines or steps) resolves it better",
+                100.0 * d
+            ));
+        }
         let _ = writeln!(
             s,
-            "warning: the filter determines {state} only to +-{:.2} % (1 sigma) on this log; the \
-             target (k2 within 0.5 %, M within 2 %, at 2 sigma) needs a log about {:.1} times \
-             longer, or one with more motion",
-            100.0 * rel,
-            longer
+            "warning: the filter determines {} only to +-{:.2} % (1 sigma) on this log; the \
+             target (k2 within 0.5 %, M within 2 %, at 2 sigma) {remedy}",
+            w.state,
+            100.0 * w.relative_std,
         );
     }
     let c = &est.consistency;
