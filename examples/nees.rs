@@ -5,6 +5,8 @@
 //! Run: `cargo run --release --example nees [seeds] [m d0 d1 d2] [sines|steps|ramp-hold] [speed]`.
 //! The environment variables `Q_D`, `Q_XDD` and `Q_SIGMA` override the process noise of those
 //! states (tuning experiments), and `TWINS` the number of twins (0: the filter's raw constants).
+//! `NEES_DEBUG` prints, per seed, the filter's d2 and M with the standard deviation it reports and
+//! its own (before it is held to its disagreement with identification), beside identification's.
 
 use camspring::estimate::ekf::idx;
 use camspring::estimate::sim::{simulate, Dynamics, Profile, SimSettings};
@@ -67,6 +69,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 law.k2_per_mm,
                 dynamics.d2_n_s3_per_mm3,
             ];
+            if std::env::var_os("NEES_DEBUG").is_some() {
+                use camspring::estimate::identify::Param;
+                let id = run.identification.as_ref()?;
+                let own = run.std_before_disagreement;
+                eprintln!(
+                    "seed {seed}: d2 filter {:.3e} +- {:.2e} (own {:.2e}) id {:.3e} +- {:.2e} truth {:.3e} | M filter {:.4} +- {:.4} (own {:.4}) id {:.4} +- {:.4}",
+                    z[idx::D2], p[(idx::D2, idx::D2)].sqrt(), own[idx::D2],
+                    id.get(Param::D2).value.unwrap_or(f64::NAN), id.get(Param::D2).std.unwrap_or(f64::NAN),
+                    dynamics.d2_n_s3_per_mm3,
+                    z[idx::M], p[(idx::M, idx::M)].sqrt(), own[idx::M],
+                    id.get(Param::M).value.unwrap_or(f64::NAN), id.get(Param::M).std.unwrap_or(f64::NAN),
+                );
+            }
             // Held states (no variance) are left out of the NEES.
             let free: Vec<usize> = (0..3).filter(|&i| p[(ids[i], ids[i])] > 0.0).collect();
             let e = Vector3::from_fn(|i, _| z[ids[i]] - truth[i]);
