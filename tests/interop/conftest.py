@@ -7,7 +7,7 @@ import subprocess
 import pytest
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
-BIN = pathlib.Path(os.environ.get("CAMSPRING_BIN", ROOT / "target" / "debug" / "camspring"))
+BIN = pathlib.Path(os.environ.get("CAMSPRING_BIN", ROOT / "target" / "release" / "camspring"))
 
 # A one-follower part with two mounting holes, and a fine chord tolerance so that
 # profile.csv is a 0.1 um reference polyline of the exact surface.
