@@ -326,8 +326,8 @@ fn reported_standard_deviations_of_m_k2_and_d2_match_the_errors_over_seeds() {
 
 /// On slow ramp-hold runs the filter's M leans high beyond its own standard deviation, where
 /// identification's M does not: with M held only to half the squared disagreement between the
-/// two, the NEES of 12 runs of the default transmission was above its band (4.70 per run
-/// against a top of 4.54). Holding it to all of the disagreement that identification's own
+/// two, the NEES of 12 runs of the default transmission was above its band (40.7 over its 25
+/// free constants against a top of 40.6). Holding it to all of the disagreement that identification's own
 /// variance does not explain brings it inside.
 #[test]
 fn the_nees_of_slow_ramp_hold_runs_lies_in_its_band() {

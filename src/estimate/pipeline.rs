@@ -1095,7 +1095,8 @@ fn widen_to_identification(run: &mut EkfRun, id: &Identification) {
 /// and on a heavy transmission's steps the filter's M is biased beyond its own standard
 /// deviation (mean z +2.1 over 12 seeds of the default transmission's ramp-hold, worst -6.8 on
 /// heavy steps) where identification's M is not. With this floor the mean NEES of [M, k2, d2]
-/// went from 10.5 to 4.25 on the first (band 1.78-4.54; half of d^2 alone left it at 4.70) and
+/// went from 10.5 to 4.45 per three free constants on the first (band 1.57-4.87 for its 25
+/// free constants over 12 runs; half of d^2 alone left it at 4.88) and
 /// from 21.0 to 3.33 on the second (docs/CALIBRATION.md). Taking all of d^2 (a floor of d) made
 /// it too wide on sines (mean NEES 1.75 over 12 seeds, below its band); taking only what
 /// exceeds identification's variance left heavy steps at 6.5. It is applied after the
