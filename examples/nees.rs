@@ -10,17 +10,12 @@
 //! `NEES_DEBUG` prints, per seed, the filter's d2 and M with the standard deviation it reports and
 //! its own (before it is held to its disagreement with identification), beside identification's.
 
-use camspring::estimate::ekf::idx;
+use camspring::estimate::ekf::{idx, ConstantsError};
 use camspring::estimate::sim::{simulate, Dynamics, Profile, SimSettings};
 use camspring::model::ExpLaw;
 use camspring::{estimate, EstimateOptions, SensorNoise};
-use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 use statrs::distribution::{ChiSquared, ContinuousCDF};
-
-/// One run: its NEES, its free constants, the z-scores of M, k2 and d2 (NaN where held), and
-/// whether the filter found itself consistent.
-type RunNees = (f64, usize, [f64; 3], bool);
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let a: Vec<String> = std::env::args().collect();
@@ -42,7 +37,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         k2_per_mm: 0.24,
         f0_n: 2.0 + 2.5 * dynamics.d0_n,
     };
-    let results: Vec<Option<RunNees>> = (0..seeds)
+    let results: Vec<Option<(ConstantsError, bool)>> = (0..seeds)
         .into_par_iter()
         .map(|seed| {
             let settings = SimSettings {
@@ -69,7 +64,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let run = estimate(&log, &opts, |_, _| {}).ok()?;
             let z = run.run.last.z;
             let p = run.run.last.p;
-            let ids = [idx::M, idx::K2, idx::D2];
             let truth = [
                 dynamics.m_n_s2_per_mm,
                 law.k2_per_mm,
@@ -88,31 +82,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     id.get(Param::M).value.unwrap_or(f64::NAN), id.get(Param::M).std.unwrap_or(f64::NAN),
                 );
             }
-            // Held states (no variance) are left out of the NEES.
-            let free: Vec<usize> = (0..3).filter(|&i| p[(ids[i], ids[i])] > 0.0).collect();
-            let e = Vector3::from_fn(|i, _| z[ids[i]] - truth[i]);
-            let cov = Matrix3::from_fn(|i, j| p[(ids[i], ids[j])]);
-            let sub_e = nalgebra::DVector::from_iterator(free.len(), free.iter().map(|&i| e[i]));
-            let sub_p =
-                nalgebra::DMatrix::from_fn(free.len(), free.len(), |a, b| cov[(free[a], free[b])]);
-            let nees = sub_p.cholesky()?.solve(&sub_e).dot(&sub_e);
-            let zs = [0, 1, 2].map(|i| {
-                if cov[(i, i)] > 0.0 {
-                    e[i] / cov[(i, i)].sqrt()
-                } else {
-                    f64::NAN
-                }
-            });
-            Some((nees, free.len(), zs, run.consistency.consistent))
+            let error = run.run.last.constants_error(truth)?;
+            Some((error, run.consistency.consistent))
         })
         .collect();
     let ok: Vec<_> = results.iter().flatten().collect();
     let n = ok.len();
     // The NEES summed over the runs has as many degrees of freedom as free constants; it is
     // reported per run on the scale of three (a run with every constant free).
-    let dof: usize = ok.iter().map(|r| r.1).sum();
-    let scale = 3.0 * n as f64 / dof.max(1) as f64 / n as f64;
-    let mean = ok.iter().map(|r| r.0).sum::<f64>() * scale;
+    let dof: usize = ok.iter().map(|r| r.0.free).sum();
+    let scale = 3.0 / dof.max(1) as f64;
+    let mean = ok.iter().map(|r| r.0.nees).sum::<f64>() * scale;
     let chi = ChiSquared::new(dof.max(1) as f64)?;
     let (lo, hi) = (
         chi.inverse_cdf(0.025) * scale,
@@ -120,12 +100,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
     println!(
         "{n} runs ({} consistent, {dof} free constants): mean NEES of [M, k2, d2] per 3 free {mean:.2}, 95 % band {lo:.2} ... {hi:.2}",
-        ok.iter().filter(|r| r.3).count()
+        ok.iter().filter(|r| r.1).count()
     );
     for (i, name) in ["M", "k2", "d2"].iter().enumerate() {
         let z: Vec<f64> = ok
             .iter()
-            .map(|r| r.2[i])
+            .map(|r| r.0.z[i])
             .filter(|z| z.is_finite())
             .collect();
         let worst = z.iter().map(|z| z.abs()).fold(0.0, f64::max);

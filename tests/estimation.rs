@@ -254,28 +254,11 @@ fn divergence_stops_with_the_sample_index() {
     assert!(err.contains("diverged at sample 60"), "{err}");
 }
 
-/// The z-scores of the final [M, k2, d2] of one run, and its normalised estimation error
-/// squared e^T P^-1 e over the constants the run estimates (a held state, with no variance,
-/// counts neither in the NEES nor in its degrees of freedom, and its z is NaN).
+/// The z-scores of the final [M, k2, d2] of one run, its NEES over the constants the run
+/// estimates, and their number (`Ekf::constants_error`).
 fn constants_nees(est: &EstimateRun, truth: [f64; 3]) -> ([f64; 3], f64, usize) {
-    use nalgebra::{DMatrix, DVector};
-    let (z, p) = (est.run.last.z, est.run.last.p);
-    let ids = [idx::M, idx::K2, idx::D2];
-    let free: Vec<usize> = (0..3).filter(|&i| p[(ids[i], ids[i])] > 0.0).collect();
-    let e = DVector::from_fn(free.len(), |a, _| z[ids[free[a]]] - truth[free[a]]);
-    let cov = DMatrix::from_fn(free.len(), free.len(), |a, b| {
-        p[(ids[free[a]], ids[free[b]])]
-    });
-    let nees = cov.cholesky().unwrap().solve(&e).dot(&e);
-    let zs = [0, 1, 2].map(|i| {
-        let var = p[(ids[i], ids[i])];
-        if var > 0.0 {
-            (z[ids[i]] - truth[i]) / var.sqrt()
-        } else {
-            f64::NAN
-        }
-    });
-    (zs, nees, free.len())
+    let c = est.run.last.constants_error(truth).unwrap();
+    (c.z, c.nees, c.free)
 }
 
 /// Asserts that the NEES summed over the runs lies in the 95 % band of chi-square with the

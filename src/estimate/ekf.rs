@@ -326,6 +326,47 @@ impl Ekf {
     pub fn std(&self) -> State {
         State::from_fn(|i, _| self.p[(i, i)].max(0.0).sqrt())
     }
+
+    /// How far the constants [M, k2, d2] lie from known values (a simulated log's truth), in
+    /// the filter's own covariance: their z-scores and the normalised estimation error squared
+    /// e^T P^-1 e. A held constant (no variance) counts neither in the NEES nor in its degrees
+    /// of freedom, and its z is NaN. None if the free constants' covariance is not positive
+    /// definite.
+    pub fn constants_error(&self, truth: [f64; 3]) -> Option<ConstantsError> {
+        let ids = [idx::M, idx::K2, idx::D2];
+        let free: Vec<usize> = (0..3).filter(|&i| self.p[(ids[i], ids[i])] > 0.0).collect();
+        let e =
+            nalgebra::DVector::from_fn(free.len(), |a, _| self.z[ids[free[a]]] - truth[free[a]]);
+        let cov = nalgebra::DMatrix::from_fn(free.len(), free.len(), |a, b| {
+            self.p[(ids[free[a]], ids[free[b]])]
+        });
+        let nees = cov.cholesky()?.solve(&e).dot(&e);
+        let z = [0, 1, 2].map(|i| {
+            let var = self.p[(ids[i], ids[i])];
+            if var > 0.0 {
+                (self.z[ids[i]] - truth[i]) / var.sqrt()
+            } else {
+                f64::NAN
+            }
+        });
+        Some(ConstantsError {
+            z,
+            nees,
+            free: free.len(),
+        })
+    }
+}
+
+/// The filter's constants [M, k2, d2] against known values ([`Ekf::constants_error`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ConstantsError {
+    /// z-scores of M, k2 and d2: error over standard deviation (NaN where held).
+    pub z: [f64; 3],
+    /// Normalised estimation error squared over the free constants: chi-square with `free`
+    /// degrees of freedom when the covariance is right.
+    pub nees: f64,
+    /// Constants the filter estimates (not held).
+    pub free: usize,
 }
 
 /// The paper's parallel, slower filter for F0 and d0: recursive least squares with forgetting
