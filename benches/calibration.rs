@@ -51,7 +51,7 @@ fn benches(c: &mut Criterion) {
             default_settings, force_rate, initial_state, Discretization, Ekf, EkfInit, ForceRate,
         };
         let id = identify(&log, &SensorNoise::default()).unwrap();
-        let init = EkfInit::from_identification(&id);
+        let init = EkfInit::from_identification(&id, SensorNoise::default().force_variance_n2);
         let dt = log.dt_s();
         let (rate, first) = force_rate(&log.force_n, dt, ForceRate::ZeroPhase);
         let (z0, sigma_std) = initial_state(&init, log.position_mm[first], 20.0);

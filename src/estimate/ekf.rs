@@ -887,27 +887,47 @@ pub struct EkfInit {
 impl EkfInit {
     /// From an identification (the paper's initialisation). Standard deviations are the
     /// identification's, at least 1 % of k2 and 10 % of M and d1, so that the filter can move.
-    pub fn from_identification(id: &Identification) -> EkfInit {
+    pub fn from_identification(id: &Identification, force_variance_n2: f64) -> EkfInit {
         let g = |p: Param| {
             let e = id.get(p);
             e.value.zip(e.std)
         };
         let k2 =
             g(Param::K2).unwrap_or((id.k2_quasi_static_per_mm, 0.05 * id.k2_quasi_static_per_mm));
-        // An inertia or cubic damping that identification does not resolve (standard deviation
-        // above half the value) is held, not estimated: the filter cannot resolve it either,
-        // and a wide prior on it lets the prediction go unstable. The inertia is then held at
-        // identification's value (at least zero: the pipeline's floor applies), d2 at zero.
+        // An inertia that identification does not resolve (standard deviation above half the
+        // value) is held, not estimated: the filter cannot resolve it either, and a wide prior
+        // on it lets the prediction go unstable. It is held at identification's value (at least
+        // zero: the pipeline's floor applies).
         let m = match g(Param::M) {
             Some((v, s)) if v > 0.0 && s < 0.5 * v => (v, s.max(0.1 * v)),
             Some((v, _)) => (v.max(0.0), 0.0),
             None => (0.0, 0.0),
         };
+        let d1 = g(Param::D1);
         let d2 = match g(Param::D2) {
             Some((v, s)) if s < 0.5 * v.abs() => (v, s.max(1e-6)),
-            _ => (0.0, 0.0),
+            // A cubic damping that identification does not resolve is still estimated when its
+            // force at the log's top speed v is several times the force noise: held at zero, a d2
+            // whose force is newtons (the paper's Table I at 6 mm/s: 2.3 N) biased k2 by 3.6 % on
+            // trapezoidal moves. It starts from identification's value within the range where
+            // the damper force rises with speed (d1 + 3 d2 v^2 > 0), with a prior of at most a
+            // quarter of that range, so that D stays positive and the prediction stable. A d2
+            // whose force is below that is held at zero (estimating it made slow runs diverge).
+            Some((v, s)) => match d1 {
+                Some((d1, _)) if d1 > 0.0 && id.speed_max_mm_per_s > 0.0 => {
+                    let speed = id.speed_max_mm_per_s;
+                    let range = d1 / (3.0 * speed * speed);
+                    let v = v.clamp(-0.5 * range, range);
+                    if v.abs() * speed.powi(3) > 3.0 * force_variance_n2.sqrt() {
+                        (v, s.min(0.25 * range))
+                    } else {
+                        (0.0, 0.0)
+                    }
+                }
+                _ => (0.0, 0.0),
+            },
+            None => (0.0, 0.0),
         };
-        let d1 = g(Param::D1);
         EkfInit {
             k2_per_mm: (k2.0, k2.1.max(0.01 * k2.0.abs())),
             mu_n: g(Param::Mu).map_or(1.0, |v| v.0),

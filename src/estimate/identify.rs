@@ -233,6 +233,8 @@ pub struct Identification {
     pub block_samples: usize,
     /// Samples used in the dynamic fit.
     pub dynamic_samples: usize,
+    /// The log's top speed, from its smoothed motion velocity (mm/s).
+    pub speed_max_mm_per_s: f64,
     /// Quasi-static samples used for the k2 stage.
     pub quasi_static_samples: usize,
     /// Savitzky-Golay window (samples).
@@ -1183,6 +1185,7 @@ pub(super) fn fit(
         log_samples: log.len(),
         block_samples: 1,
         dynamic_samples: m,
+        speed_max_mm_per_s: vmax,
         quasi_static_samples: qs_rows.f.len(),
         sg_window: diff.window(),
         sg_window_s: diff.window() as f64 * dt,

@@ -384,12 +384,16 @@ fn held_states(settings: &EkfSettings) -> Vec<&'static str> {
 pub fn format_consistency(est: &EstimateRun) -> String {
     let mut s = String::new();
     let held = held_states(&est.settings);
-    if !held.is_empty() {
-        let _ = writeln!(
-            s,
-            "  held at identification's value (not resolved by it, so not estimated): {}",
-            held.join(", ")
-        );
+    for name in held {
+        let why = match name {
+            "m_n_s2_per_mm" => "identification does not resolve it; held at its value",
+            "d2_n_s3_per_mm3" => {
+                "identification does not resolve it and its force at the log's top speed is \
+                 below three times the force noise; held at zero"
+            }
+            _ => "held at its initial value",
+        };
+        let _ = writeln!(s, "  {name}: not estimated ({why})");
     }
     if let Some(r) = &est.recovery {
         let _ = writeln!(s, "note: {r}");
