@@ -1,0 +1,262 @@
+"""An independent calibration rig: logs of a transmission with known truth, written as rigs
+write them, for judging camspring's identify / estimate / validate from outside.
+
+Nothing here comes from camspring's own simulator. The motions are the kind a motion
+controller or a force-controlled test machine produces:
+
+- ``multisine``: a sum of sines at other frequencies than camspring's, with random phases;
+- ``trapezoid``: point-to-point moves with a trapezoidal velocity profile (the acceleration
+  steps, as a motion controller's does), with holds;
+- ``force``: a force-controlled rig: the motor's force follows a smooth command and the
+  rod's motion is whatever the transmission makes of it (integrated here with RK4 at a fine
+  step), with stick-slip friction: at rest the rod is held by static friction anywhere in
+  +-d0, so a rest's force is the spring's plus whatever friction the last motion left.
+
+The rod force is eq. (9): F = m xdd + d1 xd + d2 xd^3 + d0 sgn(xd) + mu exp(k2 x) + F0, in N,
+mm and s. Sensor noise is white at the given variances; the encoder may also be quantised.
+"""
+from dataclasses import dataclass
+
+import math
+
+import numpy as np
+
+
+@dataclass
+class Transmission:
+    m: float = 0.25  # N s^2/mm
+    d0: float = 0.0  # N
+    d1: float = 1.5  # N s/mm
+    d2: float = -0.008  # N s^3/mm^3
+    mu: float = 1.1  # N
+    k2: float = 0.24  # 1/mm
+    f0: float = 2.0  # N
+
+    def spring(self, x):
+        return self.mu * np.exp(self.k2 * x) + self.f0
+
+    def damper(self, xd):
+        """The damper and Coulomb force. At rest (xd = 0) the friction keeps the sign of the
+        last motion: a rod held still after loading stays held by the friction it slid
+        against (no pre-sliding relaxation)."""
+        sign = np.sign(xd)
+        moving = np.flatnonzero(sign)
+        if moving.size:
+            # Carry the last nonzero sign forward over rests (the first rest takes the first).
+            last = np.maximum.accumulate(np.where(sign != 0, np.arange(len(sign)), -1))
+            sign = np.where(last >= 0, sign[np.maximum(last, 0)], sign[moving[0]])
+        return self.d1 * xd + self.d2 * xd**3 + self.d0 * sign
+
+    def force(self, x, xd, xdd):
+        return self.m * xdd + self.damper(xd) + self.spring(x)
+
+    def max_speed(self):
+        """The speed above which the damper force would fall with speed (d2 < 0)."""
+        if self.d2 >= 0.0:
+            return np.inf
+        return np.sqrt(self.d1 / (3.0 * abs(self.d2)))
+
+
+@dataclass
+class Rig:
+    rate_hz: float = 100.0
+    force_variance: float = 0.017  # N^2
+    position_variance: float = 0.01  # mm^2
+    encoder_step_mm: float = 0.0  # quantisation of the position (0: none)
+    seed: int = 0
+
+
+def multisine(t, lo, hi, freqs, rng):
+    """Sum of sines with random phases, scaled into [lo, hi]; exact derivatives."""
+    w = 2 * np.pi * np.asarray(freqs)
+    amp = 1.0 / w**0.5  # more amplitude at low frequency, as a slow rig would
+    ph = rng.uniform(0, 2 * np.pi, len(w))
+    s = np.zeros_like(t)
+    sd = np.zeros_like(t)
+    sdd = np.zeros_like(t)
+    for a, wi, p in zip(amp, w, ph):
+        s += a * np.sin(wi * t + p)
+        sd += a * wi * np.cos(wi * t + p)
+        sdd -= a * wi * wi * np.sin(wi * t + p)
+    peak = np.sum(amp)
+    mid, half = (lo + hi) / 2, (hi - lo) / 2
+    k = half / peak
+    return mid + k * s, k * sd, k * sdd
+
+
+def trapezoid(t, levels, vmax, amax, hold):
+    """Point-to-point moves between levels, trapezoidal velocity (acceleration steps)."""
+    x = np.full_like(t, levels[0])
+    xd = np.zeros_like(t)
+    xdd = np.zeros_like(t)
+    t0 = hold
+    for a, b in zip(levels[:-1], levels[1:]):
+        d = abs(b - a)
+        s = np.sign(b - a)
+        ta = vmax / amax
+        if amax * ta * ta > d:  # triangular: never reaches vmax
+            ta = np.sqrt(d / amax)
+            tc = 0.0
+            vp = amax * ta
+        else:
+            tc = (d - amax * ta * ta) / vmax
+            vp = vmax
+        T = 2 * ta + tc
+        m = (t >= t0) & (t < t0 + T)
+        u = t[m] - t0
+        pos = np.where(
+            u < ta,
+            0.5 * amax * u * u,
+            np.where(
+                u < ta + tc,
+                0.5 * amax * ta * ta + vp * (u - ta),
+                d - 0.5 * amax * (T - u) ** 2,
+            ),
+        )
+        vel = np.where(u < ta, amax * u, np.where(u < ta + tc, vp, amax * (T - u)))
+        acc = np.where(u < ta, amax, np.where(u < ta + tc, 0.0, -amax))
+        x[m] = a + s * pos
+        xd[m] = s * vel
+        xdd[m] = s * acc
+        after = t >= t0 + T
+        x[after] = b
+        xd[after] = 0.0
+        xdd[after] = 0.0
+        t0 += T + hold
+    return x, xd, xdd
+
+
+def force_driven(t, tr, f_lo, f_hi, freqs, rng, substeps=20):
+    """A force-controlled rig: F(t) commanded, the transmission's motion integrated (RK4 on
+    each substep) with Karnopp stick-slip friction: a rod at rest stays at rest while the net
+    force is within +-d0 (static friction holds it), and slides against d0 sgn(v) otherwise."""
+    w = 2 * np.pi * np.asarray(freqs)
+    ph = rng.uniform(0, 2 * np.pi, len(w))
+    amp = 1.0 / w**0.5
+    peak = np.sum(amp)
+    terms = list(zip(amp.tolist(), w.tolist(), ph.tolist()))
+    mid, half = (f_lo + f_hi) / 2, (f_hi - f_lo) / 2
+
+    def command(tt):
+        # A smooth saturation, so that the run spends time near both ends of the range.
+        s = sum(a * math.sin(wi * tt + p) for a, wi, p in terms) / peak
+        return mid + half * math.tanh(2.5 * s) / math.tanh(2.5)
+
+    m, d0, d1, d2, mu, k2, f0 = tr.m, tr.d0, tr.d1, tr.d2, tr.mu, tr.k2, tr.f0
+    v_stick = 1e-4  # mm/s: below this a rod counts as at rest
+
+    def net(tt, x, v):
+        """Force on the rod except the Coulomb friction."""
+        return command(tt) - (d1 * v + d2 * v * v * v) - mu * math.exp(k2 * x) - f0
+
+    def accel(tt, x, v, sliding_sign):
+        if abs(v) > 1e3:
+            raise OverflowError("the rod runs away")
+        return (net(tt, x, v) - d0 * sliding_sign) / m
+
+    # Start at the equilibrium of the first command (spring alone).
+    x = math.log(max(command(0.0) - tr.f0, 1e-9) / tr.mu) / tr.k2
+    v = 0.0
+    dt = (t[1] - t[0]) / substeps
+    xs = np.empty_like(t)
+    vs = np.empty_like(t)
+    acc = np.empty_like(t)
+    tt = t[0]
+
+    def friction_state(tt, x, v):
+        """None while static friction holds the rod, else the sign the friction opposes."""
+        if abs(v) < v_stick:
+            drive = net(tt, x, 0.0)
+            return None if abs(drive) <= d0 else math.copysign(1.0, drive)
+        return math.copysign(1.0, v)
+
+    for i in range(len(t)):
+        # The state at the sample's own time t[i], with the force commanded then.
+        tt = t[i]
+        s_now = friction_state(tt, x, v)
+        xs[i], vs[i] = x, v
+        acc[i] = 0.0 if s_now is None else accel(tt, x, v, s_now)
+        for _ in range(substeps):
+            s_now = friction_state(tt, x, v)
+            if s_now is None:
+                v = 0.0
+                tt += dt
+                continue
+            k1x, k1v = v, accel(tt, x, v, s_now)
+            k2x, k2v = v + dt / 2 * k1v, accel(tt + dt / 2, x + dt / 2 * k1x, v + dt / 2 * k1v, s_now)
+            k3x, k3v = v + dt / 2 * k2v, accel(tt + dt / 2, x + dt / 2 * k2x, v + dt / 2 * k2v, s_now)
+            k4x, k4v = v + dt * k3v, accel(tt + dt, x + dt * k3x, v + dt * k3v, s_now)
+            nv = v + dt / 6 * (k1v + 2 * k2v + 2 * k3v + k4v)
+            x += dt / 6 * (k1x + 2 * k2x + 2 * k3x + k4x)
+            # Sliding stops where the velocity would change sign.
+            v = 0.0 if nv * s_now < 0.0 else nv
+            tt += dt
+    f = np.array([command(ti) for ti in t])
+    return xs, vs, acc, f
+
+
+SPEEDS = (1.0, 0.7, 0.5, 0.35, 0.25, 0.18, 0.12)
+
+
+def feasible(tr, x, xd, xdd, f):
+    """A wire only pulls, and the damper force must still rise with speed."""
+    return f.min() > 0.3 and np.max(np.abs(xd)) < 0.8 * tr.max_speed()
+
+
+def motion(tr, rig, profile, t, xmax, speed, rng):
+    lo, hi = 0.12 * xmax, 0.88 * xmax
+    if profile == "multisine":
+        freqs = np.array([0.07, 0.19, 0.33, 0.57]) * speed
+        x, xd, xdd = multisine(t, lo, hi, freqs, rng)
+        return x, xd, xdd, tr.force(x, xd, xdd)
+    if profile == "trapezoid":
+        levels = list(rng.uniform(lo, hi, 400))
+        x, xd, xdd = trapezoid(t, levels, vmax=6.0 * speed, amax=8.0 * speed, hold=1.0)
+        return x, xd, xdd, tr.force(x, xd, xdd)
+    if profile == "force":
+        f_lo, f_hi = tr.spring(0.02 * xmax), tr.spring(0.98 * xmax)
+        freqs = np.array([0.05, 0.13, 0.29]) * speed
+        return force_driven(t, tr, f_lo, f_hi, freqs, rng)
+    raise ValueError(profile)
+
+
+def run(tr, rig, profile, duration_s, xmax=15.0):
+    """Returns (t, force_measured, position_measured, truth dict), at the fastest speed of
+    SPEEDS that the transmission allows (see `feasible`)."""
+    n = int(round(duration_s * rig.rate_hz))
+    t = np.arange(n) / rig.rate_hz
+    for speed in SPEEDS:
+        rng = np.random.default_rng(rig.seed)
+        try:
+            x, xd, xdd, f = motion(tr, rig, profile, t, xmax, speed, rng)
+        except OverflowError:  # a force-driven run whose damper force falls with speed runs away
+            continue
+        if np.all(np.isfinite(x)) and feasible(tr, x, xd, xdd, f):
+            break
+    else:
+        raise ValueError(f"no feasible speed for {profile} on {tr}")
+    fm = f + rng.normal(0, np.sqrt(rig.force_variance), n)
+    xm = x + rng.normal(0, np.sqrt(rig.position_variance), n)
+    if rig.encoder_step_mm > 0:
+        xm = np.round(xm / rig.encoder_step_mm) * rig.encoder_step_mm
+    truth = dict(
+        m=tr.m, d0=tr.d0, d1=tr.d1, d2=tr.d2, mu=tr.mu, k2=tr.k2, f0=tr.f0, speed=speed,
+        max_speed=float(np.max(np.abs(xd))), x_range=(float(x.min()), float(x.max())),
+        force_range=(float(f.min()), float(f.max())),
+    )
+    return t, fm, xm, truth
+
+
+def write_rig_log(path, t, f, x, style="comma", comment=True, drop=()):
+    """Writes the log as a rig does: a comment header, the chosen separator, dropped rows."""
+    sep = {"comma": ",", "tab": "\t", "semicolon": ";"}[style]
+    drop = set(drop)
+    with open(path, "w") as out:
+        if comment:
+            out.write("# rig: independent test bench, channel 3 load cell, channel 1 encoder\n")
+            out.write("# started 2026-11-25T10:00:00Z\n")
+        out.write(sep.join(["t_s", "force_n", "position_mm"]) + "\n")
+        for i, (ti, fi, xi) in enumerate(zip(t, f, x)):
+            if i in drop:
+                continue
+            out.write(f"{ti:.4f}{sep}{fi:.5f}{sep}{xi:.5f}\n")
