@@ -9,38 +9,16 @@ heavy one, the paper's Table I and a light one. Every log has a comment header, 
 and a dropped sample.
 """
 import json
-import pathlib
-import subprocess
 
-import numpy as np
 import pytest
 
-from conftest import BIN
-from rig_sim import Rig, Transmission, run, write_rig_log
+from rig_matrix import KEYS, ROWS as MATRIX_ROWS, camspring, spec
+from rig_sim import Rig, run, write_rig_log
 
-ROWS = {
-    # The issue's example: heavy, strongly damped, no Coulomb friction.
-    "issue": Transmission(m=0.25, d0=0.0, d1=1.5, d2=-0.008, mu=1.1, k2=0.24, f0=2.0),
-    # The paper's Table I, with F0 raised so that the wire never pushes.
-    "table-I": Transmission(m=0.39, d0=3.82, d1=1.84, d2=-0.0108, mu=0.9251, k2=0.2586, f0=13.75),
-    # Light: inertia and damping below the force noise.
-    "light": Transmission(m=0.002, d0=0.0, d1=0.05, d2=0.0, mu=1.1, k2=0.24, f0=2.0),
-}
+# The issue's heavy transmission, the paper's Table I and a light one (rig_matrix.ROWS).
+ROWS = {name: MATRIX_ROWS[name] for name in ("issue", "table-I", "light")}
 PROFILES = ["multisine", "trapezoid", "force"]
-KEYS = [
-    ("m_n_s2_per_mm", "m"),
-    ("d0_n", "d0"),
-    ("d1_n_s_per_mm", "d1"),
-    ("d2_n_s3_per_mm3", "d2"),
-    ("mu_n", "mu"),
-    ("k2_per_mm", "k2"),
-    ("f0_n", "f0"),
-]
 DROPPED_ROW = 1234
-
-
-def camspring(*args):
-    return subprocess.run([str(BIN), *map(str, args)], capture_output=True, text=True)
 
 
 def rig_log(tmp_path, row, profile, seed=0, duration_s=300.0):
@@ -49,16 +27,6 @@ def rig_log(tmp_path, row, profile, seed=0, duration_s=300.0):
     path = tmp_path / f"{row}-{profile}.tsv"
     write_rig_log(path, t, f, x, style="tab", drop=[DROPPED_ROW])
     return path, truth
-
-
-def spec(tmp_path, tr, k2_scale=1.0, name="rig"):
-    path = tmp_path / f"{name}.toml"
-    path.write_text(
-        f'name = "{name}"\n[law]\nmu = "{tr.mu} N"\nk2 = "{tr.k2 * k2_scale} /mm"\n'
-        f'f0 = "{tr.f0} N"\nxmax = "15 mm"\n'
-        '[follower]\nspring_rate = "5 N/mm"\nroller_radius = "3 mm"\npreload = "1.5 mm"\n'
-    )
-    return path
 
 
 @pytest.fixture(scope="module", params=[(r, p) for r in ROWS for p in PROFILES], ids=lambda c: f"{c[0]}-{c[1]}")
@@ -130,7 +98,7 @@ def test_the_filter_never_diverges_and_is_honest_when_it_says_it_is_consistent(c
 def test_validate_passes_the_true_law_and_fails_one_with_k2_five_percent_high(case):
     tr = ROWS[case["row"]]
     tmp = case["tmp"]
-    right = camspring("validate", spec(tmp, tr, name="true"), case["log"], "--tolerance", "3%", "--json")
+    right = camspring("validate", spec(tmp / "true.toml", tr, 1.0), case["log"], "--tolerance", "3%", "--json")
     assert right.returncode == 0, right.stdout[-2000:] + right.stderr
-    wrong = camspring("validate", spec(tmp, tr, 1.05, name="off"), case["log"], "--tolerance", "3%", "--json")
+    wrong = camspring("validate", spec(tmp / "off.toml", tr, 1.05), case["log"], "--tolerance", "3%", "--json")
     assert wrong.returncode == 1, wrong.stdout[-2000:] + wrong.stderr
