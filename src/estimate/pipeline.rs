@@ -822,6 +822,8 @@ where
     let mut run = run;
     if let Some(id) = &identification {
         widen_to_identification(&mut run, id);
+        let identified_s = id.samples as f64 * id.block_samples as f64 * dt;
+        widen_offsets(&mut run, id, identified_s);
     }
     // The filter's own bias, measured on twins of the log and taken out.
     let twins = match (&identification, frictionless) {
@@ -1115,6 +1117,35 @@ fn widen_to_identification(run: &mut EkfRun, id: &Identification) {
             s_id
         };
         widen(run, k, floor);
+    }
+}
+
+/// Brings the parallel filter's standard deviations of F0 and d0 up to identification's,
+/// scaled to the filter's memory: sqrt(identified span / memory) times identification's.
+///
+/// The parallel filter is recursive least squares with a memory of
+/// [`ekf::OFFSET_MEMORY_S`], and its covariance takes the residuals as white. They are not
+/// (the smoothed position's noise and any model error colour them over a window), and on an
+/// independent rig's Table I logs it reported d0 to +-0.01 N where it was 0.12 to 0.38 N off
+/// (z 11 to 37). Identification's sandwich covariance allows for coloured residuals over the
+/// span it identified; a filter that remembers a fraction of that span knows F0 and d0 no
+/// better than that fraction's share of the information.
+fn widen_offsets(run: &mut EkfRun, id: &Identification, identified_s: f64) {
+    use super::identify::Param;
+    let share = (identified_s / ekf::OFFSET_MEMORY_S).max(1.0).sqrt();
+    let std = run.offset_filter.std();
+    for (k, p) in [(0, Param::F0), (1, Param::D0)] {
+        let Some(s_id) = id.get(p).std else {
+            continue;
+        };
+        let floor = s_id * share;
+        if std[k] > 0.0 && std[k] < floor && floor.is_finite() {
+            let f = floor / std[k];
+            for j in 0..2 {
+                run.offset_filter.p[(k, j)] *= f;
+                run.offset_filter.p[(j, k)] *= f;
+            }
+        }
     }
 }
 
