@@ -1132,13 +1132,13 @@ fn widen_to_identification(run: &mut EkfRun, id: &Identification) {
 /// better than that fraction's share of the information.
 fn widen_offsets(run: &mut EkfRun, id: &Identification, identified_s: f64) {
     use super::identify::Param;
-    let share = (identified_s / ekf::OFFSET_MEMORY_S).max(1.0).sqrt();
+    let scale = (identified_s / ekf::OFFSET_MEMORY_S).max(1.0).sqrt();
     let std = run.offset_filter.std();
     for (k, p) in [(0, Param::F0), (1, Param::D0)] {
         let Some(s_id) = id.get(p).std else {
             continue;
         };
-        let floor = s_id * share;
+        let floor = s_id * scale;
         if std[k] > 0.0 && std[k] < floor && floor.is_finite() {
             let f = floor / std[k];
             for j in 0..2 {
@@ -1490,8 +1490,8 @@ mod tests {
     /// A rod at rest under static friction: held still after loading (friction +d0), then
     /// sticking while the force on it falls through most of the friction band, the position
     /// constant but for the encoder's noise. The stage takes the friction out whatever its
-    /// value in +-d0, so what goes on to the filter is the spring's force and the force noise;
-    /// with a choice of -d0, 0 or +d0 a band-crossing ramp left up to d0 / 2 in it.
+    /// value in +-d0, so what goes on to the filter is the spring's force and the model's
+    /// noise; with a choice of -d0, 0 or +d0 a band-crossing ramp left up to d0 / 2 in it.
     #[test]
     fn a_sticking_rod_leaves_the_spring_force_whatever_its_static_friction() {
         use rand::{rngs::StdRng, SeedableRng};
@@ -1530,14 +1530,11 @@ mod tests {
             dt,
         );
         let mut out = Vec::new();
-        let mut logged = Vec::new();
         for i in 0..n {
             let t = i as f64 * dt;
-            let f_noise = fn_noise.sample(&mut rng);
-            logged.push(f_noise);
             let s = Sample {
                 t_s: t,
-                force_n: law.force_n(x) + friction(t) + f_noise,
+                force_n: law.force_n(x) + friction(t) + fn_noise.sample(&mut rng),
                 position_mm: x + xn_noise.sample(&mut rng),
             };
             stage.push(i, s);
@@ -1556,11 +1553,9 @@ mod tests {
             .iter()
             .map(|(_, s)| (s.force_n - spring).abs())
             .fold(0.0, f64::max);
-        eprintln!("predicted sd {sd:.3} N, worst {worst:.3} N");
         assert!(worst < 4.0 * sd, "worst {worst:.3} N against sd {sd:.3} N");
         for span in out.chunks(500) {
             let mean = span.iter().map(|(_, s)| s.force_n - spring).sum::<f64>() / 500.0;
-            eprintln!("mean over 5 s {mean:.3} N");
             assert!(mean.abs() < 0.25, "mean left over 5 s {mean:.3} N");
         }
     }
