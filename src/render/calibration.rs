@@ -339,8 +339,7 @@ pub fn estimate_csv(run: &EkfRun) -> Vec<u8> {
 /// sample), d_n_s_per_mm (at the last sample), f0_n and d0_n (parallel filter).
 pub fn estimate_json(est: &EstimateRun) -> Value {
     let (run, settings) = (&est.run, &est.settings);
-    let z = run.last.z;
-    let sd = run.last.std();
+    let (z, sd) = est.reported_constants();
     let f = run.offset_filter.theta;
     let fs = run.offset_filter.std();
     json!({
@@ -386,10 +385,14 @@ pub fn format_consistency(est: &EstimateRun) -> String {
     let held = held_states(&est.settings);
     for name in held {
         let why = match name {
-            "m_n_s2_per_mm" => "identification does not resolve it; held at its value",
+            "m_n_s2_per_mm" => {
+                "identification does not resolve it; held at its value, reported with its \
+                 standard deviation"
+            }
             "d2_n_s3_per_mm3" => {
                 "identification does not resolve it and its force at the log's top speed is \
-                 below three times the force noise; held at zero"
+                 below three times the force noise; held at zero, reported at identification's \
+                 value"
             }
             _ => "held at its initial value",
         };
@@ -466,10 +469,11 @@ pub fn format_consistency(est: &EstimateRun) -> String {
     s
 }
 
-/// The text summary of `camspring estimate`.
-pub fn format_estimate(run: &EkfRun) -> String {
-    let z = run.last.z;
-    let sd = run.last.std();
+/// The text summary of `camspring estimate` (held constants at identification's value and
+/// standard deviation, [`EstimateRun::reported_constants`]).
+pub fn format_estimate(est: &EstimateRun) -> String {
+    let run = &est.run;
+    let (z, sd) = est.reported_constants();
     let f = run.offset_filter.theta;
     let fs = run.offset_filter.std();
     let mut s = String::new();

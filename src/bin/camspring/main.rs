@@ -553,7 +553,7 @@ fn main() -> ExitCode {
                 Ok(Report::of_checks(
                     format!(
                         "{}{}  time series: {}\n",
-                        format_estimate(&est.run),
+                        format_estimate(&est),
                         format_consistency(&est),
                         path.display()
                     ),
