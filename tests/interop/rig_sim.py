@@ -242,7 +242,7 @@ def run(tr, rig, profile, duration_s, xmax=15.0):
     truth = dict(
         m=tr.m, d0=tr.d0, d1=tr.d1, d2=tr.d2, mu=tr.mu, k2=tr.k2, f0=tr.f0, speed=speed,
         max_speed=float(np.max(np.abs(xd))), x_range=(float(x.min()), float(x.max())),
-        force_range=(float(f.min()), float(f.max())),
+        force_range=(float(f.min()), float(f.max())), t=t, xd=xd,
     )
     return t, fm, xm, truth
 

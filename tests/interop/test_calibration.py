@@ -10,6 +10,7 @@ and a dropped sample.
 """
 import json
 
+import numpy as np
 import pytest
 
 from rig_matrix import KEYS, ROWS as MATRIX_ROWS, camspring, spec
@@ -93,6 +94,13 @@ def test_the_filter_never_diverges_and_is_honest_when_it_says_it_is_consistent(c
     for key, name in (("f0_n", "f0"), ("d0_n", "d0")):
         z = (final[key] - truth[name]) / final[key + "_std"]
         assert abs(z) < 3.0, (key, final[key], final[key + "_std"], truth[name])
+    # The generalised damping D = d1 + 3 d2 xd^2 at the filter's last sample (it claimed
+    # +-0.0004 N s/mm where it was 0.076 off, until held to identification's and to their
+    # disagreement).
+    xd_end = np.interp(j["t_end_s"], truth["t"], truth["xd"])
+    d_true = truth["d1"] + 3.0 * truth["d2"] * xd_end**2
+    z = (final["d_n_s_per_mm"] - d_true) / final["d_n_s_per_mm_std"]
+    assert abs(z) < 3.0, (final["d_n_s_per_mm"], final["d_n_s_per_mm_std"], d_true)
     # Within its target, or it says it is not.
     imprecise = {i["state"] for i in j["imprecise"]}
     if abs(final["k2_per_mm"] / truth["k2"] - 1.0) > 0.005:
