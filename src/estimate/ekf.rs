@@ -181,6 +181,14 @@ pub struct StepInfo {
     pub innovation_variance_mm2: f64,
 }
 
+impl EkfSettings {
+    /// Whether the filter holds state `k` at its initial value: no initial variance and no
+    /// process noise (an M or d2 identification does not resolve).
+    pub fn holds(&self, k: usize) -> bool {
+        self.p0_std[k] == 0.0 && self.q[k] == 0.0
+    }
+}
+
 impl Ekf {
     /// A filter at `z0` with the settings' initial covariance.
     pub fn new(z0: State, settings: EkfSettings) -> Ekf {
@@ -281,7 +289,7 @@ impl Ekf {
             let variance = self.p[(i, i)];
             // A state held at its initial value (no initial variance, no process noise) stays
             // at zero variance.
-            let held = self.settings.p0_std[i] == 0.0 && self.settings.q[i] == 0.0;
+            let held = self.settings.holds(i);
             if variance <= 0.0 && !held {
                 return Err(diverged(format!(
                     "the variance of {name} is {variance} (no longer positive definite)"
@@ -314,9 +322,7 @@ impl Ekf {
 
     /// Whether the covariance of the states that are not held is positive definite.
     fn positive_definite(&self) -> bool {
-        let free: Vec<usize> = (0..8)
-            .filter(|&i| !(self.settings.p0_std[i] == 0.0 && self.settings.q[i] == 0.0))
-            .collect();
+        let free: Vec<usize> = (0..8).filter(|&i| !self.settings.holds(i)).collect();
         nalgebra::DMatrix::from_fn(free.len(), free.len(), |a, b| self.p[(free[a], free[b])])
             .cholesky()
             .is_some()

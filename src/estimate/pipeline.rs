@@ -228,7 +228,7 @@ impl EstimateRun {
         let mut sd = self.run.last.std();
         if let Some(id) = &self.identification {
             for (k, p) in [(ekf::idx::M, Param::M), (ekf::idx::D2, Param::D2)] {
-                let held = self.settings.p0_std[k] == 0.0 && self.settings.q[k] == 0.0;
+                let held = self.settings.holds(k);
                 if let (true, Some(v), Some(s)) = (held, id.get(p).value, id.get(p).std) {
                     z[k] = v;
                     sd[k] = s;
@@ -246,7 +246,7 @@ impl EstimateRun {
         let sd = self.run.last.std();
         FILTER_TARGET_PRECISION
             .iter()
-            .filter(|&&(k, _)| !(self.settings.p0_std[k] == 0.0 && self.settings.q[k] == 0.0))
+            .filter(|&&(k, _)| !self.settings.holds(k))
             .filter_map(|&(k, target)| {
                 let scale = z[k].abs().max(1e-300);
                 let rel = sd[k] / scale;
@@ -952,7 +952,7 @@ where
     };
     let estimated: Vec<usize> = TWIN_CORRECTED
         .into_iter()
-        .filter(|&k| setup.settings.p0_std[k] > 0.0 || setup.settings.q[k] > 0.0)
+        .filter(|&k| !setup.settings.holds(k))
         .collect();
     let std_of = |p: Param| id.get(p).std.unwrap_or(0.0);
     struct Twin {

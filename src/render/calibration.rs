@@ -373,7 +373,7 @@ pub fn estimate_json(est: &EstimateRun) -> Value {
 /// The states the filter held at their initial value (no initial variance, no process noise).
 fn held_states(settings: &EkfSettings) -> Vec<&'static str> {
     (0..8)
-        .filter(|&i| settings.p0_std[i] == 0.0 && settings.q[i] == 0.0)
+        .filter(|&i| settings.holds(i))
         .map(|i| STATE_NAMES[i])
         .collect()
 }
