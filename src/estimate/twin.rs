@@ -253,16 +253,24 @@ pub struct TwinState {
     pub filter: f64,
     /// The filter's own standard deviation on the log.
     pub filter_std: f64,
-    /// Each twin's error (estimate minus truth).
-    pub errors: Vec<f64>,
-    /// Their mean: the bias taken out.
+    /// Each twin's error (estimate minus truth; None where its filter diverged), in
+    /// antithetic pairs: twins 2p and 2p + 1 start from identification's error drawn with
+    /// opposite signs, on the same noise.
+    pub errors: Vec<Option<f64>>,
+    /// The mean of the pairs' means: the bias taken out (identification's error, drawn with
+    /// both signs, cancels in it to first order).
     pub bias: f64,
-    /// The standard deviation of the twins' errors about their mean.
+    /// The standard deviation of the pairs' means about their mean: the filter's own scatter
+    /// on the twins (with fewer than two complete pairs, that of the twins that ran, which
+    /// then holds the init spread as well).
     pub scatter: f64,
+    /// The RMS of the pairs' half differences: how far identification's error, drawn from its
+    /// covariance, moves the filter's value.
+    pub init_spread: f64,
     /// The reported value: filter minus bias.
     pub corrected: f64,
     /// Its standard deviation: the larger of the filter's and the scatter, with the bias's
-    /// own uncertainty (scatter^2 / twins) added.
+    /// own uncertainty (scatter^2 / pairs) and the init spread added.
     pub corrected_std: f64,
 }
 
@@ -283,16 +291,18 @@ pub struct TwinBias {
 
 impl TwinBias {
     /// Combines the twins' errors on each constant with the filter's value on the log.
-    /// `constants` holds (name, filter value, filter std, errors); constants with fewer than
-    /// two errors are left out. The twins copy `span_s` of a log `log_s` long: where the log is
-    /// longer, the twins' scatter is that of a shorter run, and is scaled by
-    /// sqrt(span / log) before it is compared with the filter's standard deviation.
+    /// `constants` holds (name, filter value, filter std, errors), the errors in antithetic
+    /// pairs (see [`TwinState::errors`]); with fewer than two complete pairs the twins that ran
+    /// count as independent draws, and with fewer than two of those the constant is left out. The twins copy `span_s` of a log `log_s` long: where the log is longer, the
+    /// twins' scatter is that of a shorter run, and is scaled by sqrt(span / log) before it
+    /// is compared with the filter's standard deviation. The init spread is not scaled: the
+    /// filter's start comes from the same identification whatever the log's length.
     pub fn new(
         twins: usize,
         span_s: f64,
         log_s: f64,
         smoothing_window_s: f64,
-        constants: Vec<(&'static str, f64, f64, Vec<f64>)>,
+        constants: Vec<(&'static str, f64, f64, Vec<Option<f64>>)>,
     ) -> TwinBias {
         let mut diverged = 0;
         let share = if log_s > span_s && span_s > 0.0 {
@@ -303,15 +313,29 @@ impl TwinBias {
         let states = constants
             .into_iter()
             .filter_map(|(state, filter, filter_std, errors)| {
-                diverged = diverged.max(twins.saturating_sub(errors.len()));
-                let n = errors.len();
-                if n < 2 {
+                diverged = diverged.max(errors.iter().filter(|e| e.is_none()).count());
+                let (means, halves): (Vec<f64>, Vec<f64>) = errors
+                    .chunks_exact(2)
+                    .filter_map(|p| Some(((p[0]? + p[1]?) / 2.0, (p[0]? - p[1]?) / 2.0)))
+                    .unzip();
+                // With fewer than two complete pairs (twins diverged), the twins that ran are
+                // taken as independent draws: their scatter then holds the init spread too.
+                let present: Vec<f64> = errors.iter().flatten().copied().collect();
+                let (units, init_spread) = if means.len() >= 2 {
+                    let n = means.len() as f64;
+                    (
+                        means,
+                        (halves.iter().map(|h| h * h).sum::<f64>() / n).sqrt(),
+                    )
+                } else if present.len() >= 2 {
+                    (present, 0.0)
+                } else {
                     return None;
-                }
-                let bias = errors.iter().sum::<f64>() / n as f64;
-                let scatter = (errors.iter().map(|e| (e - bias).powi(2)).sum::<f64>()
-                    / (n - 1) as f64)
-                    .sqrt();
+                };
+                let n = units.len();
+                let bias = units.iter().sum::<f64>() / n as f64;
+                let scatter =
+                    (units.iter().map(|e| (e - bias).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt();
                 // The estimate's own spread on the log's length, and the bias's uncertainty:
                 // the twins' errors scatter at least as the filter's would over their span.
                 let spread = (scatter * share.sqrt()).max(filter_std);
@@ -323,8 +347,10 @@ impl TwinBias {
                     filter_std,
                     bias,
                     scatter,
+                    init_spread,
                     corrected: filter - bias,
-                    corrected_std: (spread * spread + bias_variance).sqrt(),
+                    corrected_std: (spread * spread + bias_variance + init_spread * init_spread)
+                        .sqrt(),
                     errors,
                 })
             })
@@ -455,34 +481,51 @@ mod tests {
     }
 
     #[test]
-    fn the_bias_is_the_mean_error_and_the_std_grows_with_the_twins_scatter() {
+    fn the_bias_is_the_mean_of_the_pairs_and_the_std_grows_with_their_scatter_and_spread() {
+        // Three antithetic pairs: means -0.004, -0.003, -0.005 (bias -0.004, scatter 1e-3);
+        // half differences 1e-3, -2e-3, 2e-3 (init spread sqrt(9e-6 / 3) = 1.732e-3). A fourth
+        // pair with a diverged twin counts as diverged and is left out.
+        let errors = vec![
+            Some(-0.003),
+            Some(-0.005),
+            Some(-0.005),
+            Some(-0.001),
+            Some(-0.003),
+            Some(-0.007),
+            Some(0.1),
+            None,
+        ];
         let b = TwinBias::new(
-            4,
+            8,
             300.0,
             300.0,
             1.0,
             vec![
-                (
-                    "k2_per_mm",
-                    0.30,
-                    0.001,
-                    vec![-0.003, -0.005, -0.004, -0.004],
-                ),
-                ("m_n_s2_per_mm", 0.1, 0.01, vec![0.001]),
+                ("k2_per_mm", 0.30, 0.0005, errors),
+                ("m_n_s2_per_mm", 0.1, 0.01, vec![Some(0.001), None]),
             ],
         );
-        assert_eq!(b.states.len(), 1, "one error is not enough for a bias");
-        assert_eq!(b.diverged, 3);
+        assert_eq!(b.states.len(), 1, "one twin is not enough for a bias");
+        assert_eq!(b.diverged, 1);
         let k = &b.states[0];
         assert!((k.bias + 0.004).abs() < 1e-12);
         assert!((k.corrected - 0.304).abs() < 1e-12);
-        // Scatter sqrt(2e-6 / 3) = 8.2e-4 < 1e-3: the filter's std stands, plus 1/4 of it.
-        assert!((k.corrected_std - 0.001 * 1.25f64.sqrt()).abs() < 1e-12);
+        assert!((k.scatter - 0.001).abs() < 1e-12);
+        assert!((k.init_spread - 3e-3f64.sqrt() * 1e-3f64.sqrt()).abs() < 1e-12);
+        // The scatter (1e-3) exceeds the filter's std; the bias's variance is it squared over
+        // three pairs; the init spread adds in full.
+        let expected = (1e-6f64 + 1e-6 / 3.0 + 3e-6).sqrt();
+        assert!(
+            (k.corrected_std - expected).abs() < 1e-12,
+            "{}",
+            k.corrected_std
+        );
         // Twins of the first hour of a day-long log: their scatter is an hour's, sqrt(24)
-        // times a day's (1.7e-4, above the filter's own 1e-4). The bias's variance is the
-        // larger of the scatter and the filter's std at an hour (4.9e-4), squared, over 4.
+        // times a day's (2.0e-4, above the filter's own 1e-4). The bias's variance is the
+        // larger of the scatter and the filter's std at an hour (4.9e-4), squared, over 3;
+        // the init spread is not scaled.
         let day = TwinBias::new(
-            4,
+            6,
             3600.0,
             86_400.0,
             1.0,
@@ -490,14 +533,48 @@ mod tests {
                 "k2_per_mm",
                 0.30,
                 1e-4,
-                vec![-0.003, -0.005, -0.004, -0.004],
+                vec![
+                    Some(-0.003),
+                    Some(-0.005),
+                    Some(-0.005),
+                    Some(-0.001),
+                    Some(-0.003),
+                    Some(-0.007),
+                ],
             )],
         );
+        // Two twins diverged in different pairs: the four that ran count as independent
+        // draws (mean -0.004, standard deviation sqrt(4e-6 / 3)).
+        let broken = TwinBias::new(
+            6,
+            300.0,
+            300.0,
+            1.0,
+            vec![(
+                "k2_per_mm",
+                0.30,
+                0.0005,
+                vec![
+                    Some(-0.003),
+                    None,
+                    Some(-0.005),
+                    None,
+                    Some(-0.003),
+                    Some(-0.005),
+                ],
+            )],
+        );
+        let k = &broken.states[0];
+        assert_eq!(broken.diverged, 2);
+        assert!((k.bias + 0.004).abs() < 1e-12);
+        assert_eq!(k.init_spread, 0.0);
+        let sd = (4e-6f64 / 3.0).sqrt();
+        assert!((k.corrected_std - (sd * sd * 1.25).sqrt()).abs() < 1e-12);
         let k = &day.states[0];
-        let scatter = (2e-6f64 / 3.0).sqrt();
+        let scatter = 1e-3f64;
         let twin_spread = scatter.max(1e-4 * 24f64.sqrt());
         let spread = (scatter / 24f64.sqrt()).max(1e-4);
-        let expected = (spread * spread + twin_spread * twin_spread / 4.0).sqrt();
+        let expected = (spread * spread + twin_spread * twin_spread / 3.0 + 3e-6).sqrt();
         assert!(
             (k.corrected_std - expected).abs() < 1e-15,
             "{}",

@@ -406,12 +406,14 @@ pub fn format_consistency(est: &EstimateRun) -> String {
             let _ = writeln!(
                 s,
                 "  {}: the filter's bias, {:+.3} %, measured on {} twins of the log (simulated \
-                 with identification's transmission, {:.0} s each) and taken out:\n    {:.6} +- \
+                 with identification's transmission, {:.0} s each) and taken out; \
+                 identification's error moves it by {:.3} % (1 sigma, included):\n    {:.6} +- \
                  {:.6} before, {:.6} +- {:.6} after",
                 c.state,
                 100.0 * c.bias / c.corrected.abs().max(1e-300),
                 c.errors.len(),
                 t.span_s,
+                100.0 * c.init_spread / c.corrected.abs().max(1e-300),
                 c.filter,
                 c.filter_std,
                 c.corrected,
