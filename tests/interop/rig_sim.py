@@ -7,6 +7,8 @@ controller or a force-controlled test machine produces:
 - ``multisine``: a sum of sines at other frequencies than camspring's, with random phases;
 - ``trapezoid``: point-to-point moves with a trapezoidal velocity profile (the acceleration
   steps, as a motion controller's does), with holds;
+- ``scurve``: the same moves, jerk-limited: the acceleration ramps over 0.1 s (an S-curve
+  motion controller's);
 - ``force``: a force-controlled rig: the motor's force follows a smooth command and the
   rod's motion is whatever the transmission makes of it (integrated here with RK4 at a fine
   step), with stick-slip friction: at rest the rod is held by static friction anywhere in
@@ -126,6 +128,23 @@ def trapezoid(t, levels, vmax, amax, hold):
     return x, xd, xdd
 
 
+def scurve(t, levels, vmax, amax, hold, jerk_time, fine=10):
+    """The trapezoidal moves with the acceleration ramped over jerk_time (S-curve): the
+    trapezoid on a grid `fine` times finer, each of x, xd and xdd averaged over a sliding
+    jerk_time (an average commutes with the derivatives, so they stay one motion's), then
+    sampled."""
+    tf = t[0] + np.arange(len(t) * fine) * (t[1] - t[0]) / fine
+    x, xd, xdd = trapezoid(tf, levels, vmax, amax, hold)
+    width = max(1, int(round(jerk_time / (tf[1] - tf[0]))))
+    kernel = np.ones(width) / width
+
+    def average(v):
+        padded = np.concatenate([np.full(width, v[0]), v, np.full(width, v[-1])])
+        return np.convolve(padded, kernel, mode="same")[width:-width][::fine]
+
+    return average(x), average(xd), average(xdd)
+
+
 def force_driven(t, tr, f_lo, f_hi, freqs, rng, substeps=20):
     """A force-controlled rig: F(t) commanded, the transmission's motion integrated (RK4 on
     each substep) with Karnopp stick-slip friction: a rod at rest stays at rest while the net
@@ -212,6 +231,10 @@ def motion(tr, rig, profile, t, xmax, speed, rng):
     if profile == "trapezoid":
         levels = list(rng.uniform(lo, hi, 400))
         x, xd, xdd = trapezoid(t, levels, vmax=6.0 * speed, amax=8.0 * speed, hold=1.0)
+        return x, xd, xdd, tr.force(x, xd, xdd)
+    if profile == "scurve":
+        levels = list(rng.uniform(lo, hi, 400))
+        x, xd, xdd = scurve(t, levels, vmax=6.0 * speed, amax=8.0 * speed, hold=1.0, jerk_time=0.1)
         return x, xd, xdd, tr.force(x, xd, xdd)
     if profile == "force":
         f_lo, f_hi = tr.spring(0.02 * xmax), tr.spring(0.98 * xmax)

@@ -3,8 +3,8 @@ written as rigs write them, through the real binary: identify, estimate and vali
 by each estimate's error against its own reported standard deviation.
 
 The rig's motions are not camspring's: random-phase multisines at other frequencies,
-trapezoidal-velocity moves whose acceleration steps (a motion controller's), and a
-force-controlled run whose motion the transmission makes. The transmissions span the issue's
+trapezoidal-velocity moves whose acceleration steps (a motion controller's), the same moves
+jerk-limited (S-curve), and a force-controlled run whose motion the transmission makes. The transmissions span the issue's
 heavy one, the paper's Table I and a light one. Every log has a comment header, tab separators
 and a dropped sample.
 """
@@ -18,7 +18,7 @@ from rig_sim import Rig, run, write_rig_log
 
 # The issue's heavy transmission, the paper's Table I and a light one (rig_matrix.ROWS).
 ROWS = {name: MATRIX_ROWS[name] for name in ("issue", "table-I", "light")}
-PROFILES = ["multisine", "trapezoid", "force"]
+PROFILES = ["multisine", "trapezoid", "scurve", "force"]
 DROPPED_ROW = 1234
 
 
@@ -40,7 +40,17 @@ def case(request, tmp_path_factory):
     return dict(row=row, profile=profile, tmp=tmp, log=log, truth=truth, identify=ident, estimate=est)
 
 
-def test_identification_is_right_within_its_own_standard_deviations(case):
+# Known misfits, each a strict xfail so that a fix shows up: identification's Savitzky-Golay
+# acceleration is the smoothed acceleration and the force is not smoothed, so at the corners of
+# a jerk-limited move the inertia force is misplaced; on Table I's transmission (m 0.39) that
+# leaves reduced chi-square 1.44 (1.35-1.44 over seeds 0-2), and on other seeds m or d1 beyond
+# 4 of their standard deviations (docs/CALIBRATION.md, "An independent rig").
+KNOWN_MISFITS = {("table-I", "scurve")}
+
+
+def test_identification_is_right_within_its_own_standard_deviations(case, request):
+    if (case["row"], case["profile"]) in KNOWN_MISFITS:
+        request.applymarker(pytest.mark.xfail(strict=True, reason="smoothed acceleration, raw force"))
     proc, truth = case["identify"], case["truth"]
     assert proc.returncode == 0, proc.stderr
     # The dropped row was filled and said so, with its line (two comment lines, the header).
@@ -116,3 +126,20 @@ def test_validate_passes_the_true_law_and_fails_one_with_k2_five_percent_high(ca
     assert right.returncode == 0, right.stdout[-2000:] + right.stderr
     wrong = camspring("validate", spec(tmp / "off.toml", tr, 1.05), case["log"], "--tolerance", "3%", "--json")
     assert wrong.returncode == 1, wrong.stdout[-2000:] + wrong.stderr
+
+
+def test_the_filter_does_not_diverge_on_jerk_limited_moves_with_strong_friction(tmp_path):
+    """Table I's transmission (d0 3.8 N) on S-curve moves, seed 1: the friction stage read the
+    holds next to each move with the smoothed motion, whose acceleration leads the move and
+    lags the stop; the filter diverged at t = 87.5 s, and again from ten times its initial
+    uncertainty (exit 2). On seed 0 it missed silently (k2 -2.9 % at z -13, M at z +7.7)."""
+    tr = MATRIX_ROWS["table-I"]
+    t, f, x, truth = run(tr, Rig(seed=1), "scurve", 300.0)
+    log = tmp_path / "table-I-scurve-1.csv"
+    write_rig_log(log, t, f, x)
+    est = camspring("estimate", log, "--json", "-o", tmp_path / "est.csv")
+    assert est.returncode in (0, 1), est.stderr
+    j = json.loads(est.stdout)
+    final = j["final"]
+    k2_z = (final["k2_per_mm"] - truth["k2"]) / final["k2_per_mm_std"]
+    assert abs(k2_z) < 3.0, (final["k2_per_mm"], final["k2_per_mm_std"], truth["k2"])
