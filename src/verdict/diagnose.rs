@@ -236,6 +236,11 @@ pub struct DiagnosisBin {
     pub loading: bool,
     /// Measured force with the fitted inertia, damping and outside Coulomb friction taken out (N).
     pub measured_n: f64,
+    /// Standard error of `measured_n` (N), from the scatter of the means of the bin's separate
+    /// passes (runs of consecutive samples in it): within a pass the errors of the dynamic
+    /// terms taken out are correlated over the smoothing window, between passes they are not.
+    /// With fewer than three passes, the samples' own scatter about the curve's local slope.
+    pub measured_std_n: f64,
     /// The design's forward model there, built as designed and logged with a true zero (N).
     pub designed_n: f64,
     /// The forward model with the fitted build (N).
@@ -948,14 +953,15 @@ fn bin_curves(design: &Design, s: &Samples, p: &[f64; P], diagnosis: &mut Diagno
                 (a.min(v), b.max(v))
             });
     let width = ((hi - lo) / BINS as f64).max(1e-12);
+    let bin_of = |x: f64| (((x - lo) / width) as usize).min(BINS - 1);
+    let quasi_static = |i: usize| {
+        s.f[i] - p[4] * s.xdd[i] - p[5] * s.sgn[i] - p[6] * s.xd[i] - p[7] * s.xd[i].powi(3)
+    };
     let mut sums = vec![[(0.0, 0.0, 0usize); 2]; BINS];
     for i in 0..s.x.len() {
-        let k = (((s.x[i] - lo) / width) as usize).min(BINS - 1);
-        let qs =
-            s.f[i] - p[4] * s.xdd[i] - p[5] * s.sgn[i] - p[6] * s.xd[i] - p[7] * s.xd[i].powi(3);
-        let e = &mut sums[k][usize::from(s.loading[i])];
+        let e = &mut sums[bin_of(s.x[i])][usize::from(s.loading[i])];
         e.0 += s.x[i];
-        e.1 += qs;
+        e.1 += quasi_static(i);
         e.2 += 1;
     }
     let a = AsBuilt::assembled(&design.spec);
@@ -966,18 +972,71 @@ fn bin_curves(design: &Design, s: &Samples, p: &[f64; P], diagnosis: &mut Diagno
         0.0,
     ];
     let build = [p[0], p[1], p[2], p[3]];
+    // Each bin's passes: the sum and count of its samples' force about the refitted curve's
+    // local slope, one entry per run of consecutive samples in the bin.
+    let slope = |xm: f64, loading: bool| {
+        let h = (0.1 * width).max(1e-6);
+        (spring_force(design, &build, xm + h, loading)
+            - spring_force(design, &build, xm - h, loading))
+            / (2.0 * h)
+    };
+    let centre = |k: usize, side: usize| {
+        let (sx, _, count) = sums[k][side];
+        (count > 0).then(|| sx / count as f64)
+    };
+    let slopes: Vec<[f64; 2]> = (0..BINS)
+        .map(|k| [0, 1].map(|side| centre(k, side).map_or(0.0, |xm| slope(xm, side == 1))))
+        .collect();
+    let mut passes = vec![[Vec::<(f64, usize)>::new(), Vec::new()]; BINS];
+    let mut previous: Option<(usize, usize)> = None;
+    for i in 0..s.x.len() {
+        let (k, side) = (bin_of(s.x[i]), usize::from(s.loading[i]));
+        let xm = centre(k, side).unwrap_or(s.x[i]);
+        let r = quasi_static(i) - slopes[k][side] * (s.x[i] - xm);
+        let list = &mut passes[k][side];
+        match list.last_mut() {
+            Some(last) if previous == Some((k, side)) => {
+                last.0 += r;
+                last.1 += 1;
+            }
+            _ => list.push((r, 1)),
+        }
+        previous = Some((k, side));
+    }
     let (mut before, mut after, mut scale) = (0.0, 0.0, 0.0);
-    for bin in &sums {
+    for (k, bin) in sums.iter().enumerate() {
         for (side, &(sx, sf, count)) in bin.iter().enumerate() {
             if count < 10 {
                 continue;
             }
             let loading = side == 1;
             let xm = sx / count as f64;
+            let mean = sf / count as f64;
+            let list = &passes[k][side];
+            let n = count as f64;
+            let measured_std_n = if list.len() >= 3 {
+                let v = list.len() as f64;
+                let spread: f64 = list
+                    .iter()
+                    .map(|&(sum, c)| (c as f64 / n).powi(2) * (sum / c as f64 - mean).powi(2))
+                    .sum();
+                (spread * v / (v - 1.0)).sqrt()
+            } else {
+                // The samples' own scatter, not divided down: they are correlated.
+                let mut ss = 0.0;
+                for i in 0..s.x.len() {
+                    if bin_of(s.x[i]) == k && usize::from(s.loading[i]) == side {
+                        let r = quasi_static(i) - slopes[k][side] * (s.x[i] - xm);
+                        ss += (r - mean).powi(2);
+                    }
+                }
+                (ss / (n - 1.0)).sqrt()
+            };
             let b = DiagnosisBin {
                 x_mm: xm,
                 loading,
-                measured_n: sf / count as f64,
+                measured_n: mean,
+                measured_std_n,
                 designed_n: spring_force(design, &nominal, xm, loading),
                 refitted_n: spring_force(design, &build, xm, loading),
                 samples: count,
