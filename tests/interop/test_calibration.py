@@ -93,11 +93,10 @@ def test_the_filter_never_diverges_and_is_honest_when_it_says_it_is_consistent(c
     assert abs(k2_z) < 3.0, (final["k2_per_mm"], final["k2_per_mm_std"], truth["k2"])
     m_resolved = ident["m_n_s2_per_mm"] is not None and ident["m_n_s2_per_mm_std"] < 0.1 * ident["m_n_s2_per_mm"]
     if m_resolved:
-        # 3.5, not 3: where identification's m leans high (above), the filter's M standard
-        # deviation, held to its disagreement with identification, is too narrow by about as
-        # much (z +3.1 on the Table I force-controlled run).
+        # (It was 3.5 while the friction stage read holds with the smeared motion: z +3.1 on the
+        # Table I force-controlled run, +4.9 on the heaviest's.)
         m_z = (final["m_n_s2_per_mm"] - truth["m"]) / final["m_n_s2_per_mm_std"]
-        assert abs(m_z) < 3.5, (final["m_n_s2_per_mm"], final["m_n_s2_per_mm_std"], truth["m"])
+        assert abs(m_z) < 3.0, (final["m_n_s2_per_mm"], final["m_n_s2_per_mm_std"], truth["m"])
     # The parallel filter's F0 and d0 (it reported d0 to +-0.01 N where it was 0.12 to 0.38 N
     # off on Table I logs, z 11 to 37, until its standard deviations were held to
     # identification's over the filter's memory).
