@@ -20,10 +20,14 @@
 //!   friction's sign taken where the velocity is beyond its noise.
 //! - **Noise:** fresh white noise at the sensors' variances, a different seed per twin.
 //!
-//! The filter runs on each twin as on the log, from a start drawn about the truth with
-//! identification's standard deviations. Each twin's error in M, k2 and d2 is known; their
-//! mean is the bias. The pipeline subtracts it and adds its uncertainty (and the twins'
-//! scatter, if wider than the filter's own standard deviation) to the variance.
+//! The filter and its friction stage run on each twin as on the log, from identification's
+//! error drawn from its covariance (the filter's start and the stage's model alike), in
+//! antithetic pairs: twins 2p and 2p + 1 take the same draw with opposite signs, on the same
+//! noise. Each twin's error in k2 is known. The mean of the pairs' means is the bias (the draw's
+//! first-order effect cancels in a pair); the RMS of their half differences is the init spread,
+//! what identification's error does to the filter's k2. The pipeline subtracts the bias and adds
+//! its uncertainty, the twins' scatter (if wider than the filter's own standard deviation) and
+//! the init spread to the variance ([`TwinBias::new`]).
 
 use std::collections::VecDeque;
 
