@@ -142,3 +142,26 @@ def test_the_filter_does_not_diverge_on_jerk_limited_moves_with_strong_friction(
     final = j["final"]
     k2_z = (final["k2_per_mm"] - truth["k2"]) / final["k2_per_mm_std"]
     assert abs(k2_z) < 3.0, (final["k2_per_mm"], final["k2_per_mm_std"], truth["k2"])
+
+
+def test_an_inertia_disagreement_names_identifications_lean_when_the_filter_is_the_precise_one(tmp_path):
+    """The default transmission on S-curve moves, seed 2: identification's m leans high (z +4.3,
+    the smoothed acceleration against the raw force at the moves' corners) while the filter's M
+    is right. The filter flags the disagreement, and its reason says which one to suspect
+    instead of sending the user to identification's M."""
+    tr = MATRIX_ROWS["default"]
+    t, f, x, truth = run(tr, Rig(seed=2), "scurve", 300.0)
+    log = tmp_path / "default-scurve-2.csv"
+    write_rig_log(log, t, f, x)
+    est = camspring("estimate", log, "--json", "-o", tmp_path / "est.csv")
+    assert est.returncode == 1, est.stderr
+    j = json.loads(est.stdout)
+    final = j["final"]
+    m_z = (final["m_n_s2_per_mm"] - truth["m"]) / final["m_n_s2_per_mm_std"]
+    assert abs(m_z) < 3.0, (final["m_n_s2_per_mm"], final["m_n_s2_per_mm_std"])
+    (reason,) = j["consistency"]["reasons"]
+    assert "identification's M is the suspect one" in reason and "k2 agrees" in reason, reason
+    # The lean this case stands on (docs/CALIBRATION.md, "Still weak"): once identification is
+    # cured of it, this log no longer flags and the test needs another case.
+    ident = json.loads(camspring("identify", log, "--json").stdout)["parameters"]
+    assert (ident["m_n_s2_per_mm"] - truth["m"]) / ident["m_n_s2_per_mm_std"] > 3.0, ident
