@@ -571,11 +571,20 @@ fn error_draws_have_identifications_covariance() {
     for (i, &a) in keys.iter().enumerate() {
         let va = id.covariance[i][i];
         let sa = cov(a, a);
-        assert!((sa / va - 1.0).abs() < 0.1, "{}: {sa} against {va}", PARAMS[a]);
+        assert!(
+            (sa / va - 1.0).abs() < 0.1,
+            "{}: {sa} against {va}",
+            PARAMS[a]
+        );
         for (j, &b) in keys.iter().enumerate().skip(i + 1) {
             let rho = id.covariance[i][j] / (va * id.covariance[j][j]).sqrt();
             let r = cov(a, b) / (sa * cov(b, b)).sqrt();
-            assert!((r - rho).abs() < 0.08, "{} {}: {r} against {rho}", PARAMS[a], PARAMS[b]);
+            assert!(
+                (r - rho).abs() < 0.08,
+                "{} {}: {r} against {rho}",
+                PARAMS[a],
+                PARAMS[b]
+            );
         }
     }
 }
