@@ -1575,6 +1575,21 @@ impl Consistency {
 mod tests {
     use super::*;
 
+    /// Every sample through the stage, in order, with its index.
+    fn through_stage(
+        stage: &mut CoulombStage,
+        samples: impl IntoIterator<Item = Sample>,
+    ) -> Vec<(usize, Sample)> {
+        let mut out = Vec::new();
+        for (i, s) in samples.into_iter().enumerate() {
+            stage.push(i, s);
+            out.extend(stage.out.drain(..));
+        }
+        stage.finish();
+        out.extend(stage.out.drain(..));
+        out
+    }
+
     /// The friction signs the stage gives a simulated log, against the true ones (from the
     /// noise-free positions: exactly zero at rest), as the share of samples that differ.
     fn sign_errors(profile: super::super::sim::Profile, speed: f64, d0: f64, window: usize) -> f64 {
@@ -1617,13 +1632,7 @@ mod tests {
         };
         let top = law.stiffness_n_per_mm(15.0);
         let mut stage = CoulombStage::new(d0, Some(model), top, window, &noise, 0.01);
-        let mut out = Vec::new();
-        for (i, s) in log_samples(&log).enumerate() {
-            stage.push(i, s.unwrap_or_default());
-            out.extend(stage.out.drain(..));
-        }
-        stage.finish();
-        out.extend(stage.out.drain(..));
+        let out = through_stage(&mut stage, log_samples(&log).map(|s| s.unwrap_or_default()));
         assert_eq!(out.len(), log.len());
         let mut wrong = 0;
         for (k, (j, s)) in out.iter().enumerate() {
@@ -1707,19 +1716,15 @@ mod tests {
             &noise,
             dt,
         );
-        let mut out = Vec::new();
-        for i in 0..n {
+        let samples = (0..n).map(|i| {
             let t = i as f64 * dt;
-            let s = Sample {
+            Sample {
                 t_s: t,
                 force_n: law.force_n(x) + friction(t) + fn_noise.sample(&mut rng),
                 position_mm: x + xn_noise.sample(&mut rng),
-            };
-            stage.push(i, s);
-            out.extend(stage.out.drain(..));
-        }
-        stage.finish();
-        out.extend(stage.out.drain(..));
+            }
+        });
+        let out = through_stage(&mut stage, samples);
         assert_eq!(out.len(), n);
         // What is left beyond the spring is the noise of the stage's frictionless model at
         // rest (m and d1 times the smoothed acceleration's and velocity's noise, and the force
@@ -1793,26 +1798,21 @@ mod tests {
             &noise,
             dt,
         );
-        let mut out = Vec::new();
-        let mut truth = Vec::new();
-        for i in 0..n {
-            let t = i as f64 * dt;
-            let (x, v, a) = motion(t);
-            // Moving or held, the friction is +d0 (the move is in the held friction's direction).
-            let f = model.force_n(x, v, a) + d0;
-            truth.push((t, x, v, model.force_n(x, v, a)));
-            stage.push(
-                i,
-                Sample {
-                    t_s: t,
-                    force_n: f + fn_noise.sample(&mut rng),
-                    position_mm: x + xn_noise.sample(&mut rng),
-                },
-            );
-            out.extend(stage.out.drain(..));
-        }
-        stage.finish();
-        out.extend(stage.out.drain(..));
+        // (time, position, velocity, frictionless force)
+        let truth: Vec<(f64, f64, f64, f64)> = (0..n)
+            .map(|i| {
+                let t = i as f64 * dt;
+                let (x, v, a) = motion(t);
+                (t, x, v, model.force_n(x, v, a))
+            })
+            .collect();
+        // Moving or held, the friction is +d0 (the move is in the held friction's direction).
+        let samples = truth.iter().map(|&(t, x, _, f)| Sample {
+            t_s: t,
+            force_n: f + d0 + fn_noise.sample(&mut rng),
+            position_mm: x + xn_noise.sample(&mut rng),
+        });
+        let out = through_stage(&mut stage, samples);
         assert_eq!(out.len(), n);
         // Within 1.5 s of the move, at rest: what is left beyond the frictionless force is
         // the stage's model noise (within four of its predicted standard deviations) and
