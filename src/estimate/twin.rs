@@ -489,16 +489,16 @@ mod tests {
         // Three antithetic pairs: means -0.004, -0.003, -0.005 (bias -0.004, scatter 1e-3);
         // half differences 1e-3, -2e-3, 2e-3 (init spread sqrt(9e-6 / 3) = 1.732e-3). A fourth
         // pair with a diverged twin counts as diverged and is left out.
-        let errors = vec![
+        let pairs = [
             Some(-0.003),
             Some(-0.005),
             Some(-0.005),
             Some(-0.001),
             Some(-0.003),
             Some(-0.007),
-            Some(0.1),
-            None,
         ];
+        let mut errors = pairs.to_vec();
+        errors.extend([Some(0.1), None]);
         let b = TwinBias::new(
             8,
             300.0,
@@ -533,19 +533,7 @@ mod tests {
             3600.0,
             86_400.0,
             1.0,
-            vec![(
-                "k2_per_mm",
-                0.30,
-                1e-4,
-                vec![
-                    Some(-0.003),
-                    Some(-0.005),
-                    Some(-0.005),
-                    Some(-0.001),
-                    Some(-0.003),
-                    Some(-0.007),
-                ],
-            )],
+            vec![("k2_per_mm", 0.30, 1e-4, pairs.to_vec())],
         );
         // Two twins diverged in different pairs: the four that ran count as independent
         // draws (mean -0.004, standard deviation sqrt(4e-6 / 3)).
