@@ -987,7 +987,8 @@ fn bin_curves(design: &Design, s: &Samples, p: &[f64; P], diagnosis: &mut Diagno
     let slopes: Vec<[f64; 2]> = (0..BINS)
         .map(|k| [0, 1].map(|side| centre(k, side).map_or(0.0, |xm| slope(xm, side == 1))))
         .collect();
-    let mut passes = vec![[Vec::<(f64, usize)>::new(), Vec::new()]; BINS];
+    // Per pass: the sum of its samples' forces about the slope, their sum of squares, count.
+    let mut passes = vec![[Vec::<(f64, f64, usize)>::new(), Vec::new()]; BINS];
     let mut previous: Option<(usize, usize)> = None;
     for i in 0..s.x.len() {
         let (k, side) = (bin_of(s.x[i]), usize::from(s.loading[i]));
@@ -997,9 +998,10 @@ fn bin_curves(design: &Design, s: &Samples, p: &[f64; P], diagnosis: &mut Diagno
         match list.last_mut() {
             Some(last) if previous == Some((k, side)) => {
                 last.0 += r;
-                last.1 += 1;
+                last.1 += r * r;
+                last.2 += 1;
             }
-            _ => list.push((r, 1)),
+            _ => list.push((r, r * r, 1)),
         }
         previous = Some((k, side));
     }
@@ -1018,19 +1020,13 @@ fn bin_curves(design: &Design, s: &Samples, p: &[f64; P], diagnosis: &mut Diagno
                 let v = list.len() as f64;
                 let spread: f64 = list
                     .iter()
-                    .map(|&(sum, c)| (c as f64 / n).powi(2) * (sum / c as f64 - mean).powi(2))
+                    .map(|&(sum, _, c)| (c as f64 / n).powi(2) * (sum / c as f64 - mean).powi(2))
                     .sum();
                 (spread * v / (v - 1.0)).sqrt()
             } else {
                 // The samples' own scatter, not divided down: they are correlated.
-                let mut ss = 0.0;
-                for i in 0..s.x.len() {
-                    if bin_of(s.x[i]) == k && usize::from(s.loading[i]) == side {
-                        let r = quasi_static(i) - slopes[k][side] * (s.x[i] - xm);
-                        ss += (r - mean).powi(2);
-                    }
-                }
-                (ss / (n - 1.0)).sqrt()
+                let squares: f64 = list.iter().map(|p| p.1).sum();
+                ((squares - n * mean * mean).max(0.0) / (n - 1.0)).sqrt()
             };
             let b = DiagnosisBin {
                 x_mm: xm,
