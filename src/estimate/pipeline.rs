@@ -498,7 +498,7 @@ impl CoulombStage {
             }
             if self.rest.is_empty() {
                 self.rest_limit = self.last_motion.map_or(0, |(_, a)| {
-                    let longest = PASSING_FACTOR * self.band / a.max(1e-12) / self.sample_dt;
+                    let longest = self.longest_passing_s(a) / self.sample_dt;
                     // No longer than a window: a slower passing carries little inertia force.
                     longest.min((2 * self.reach + 1) as f64) as usize
                 });
@@ -513,9 +513,9 @@ impl CoulombStage {
         let direction = v.signum();
         if !self.rest.is_empty() {
             let passing = self.last_motion.is_some_and(|(before, a)| {
-                let a = a.min(motion[2].abs()).max(1e-12);
                 before == -direction
-                    && self.rest.len() as f64 * self.sample_dt <= PASSING_FACTOR * self.band / a
+                    && self.rest.len() as f64 * self.sample_dt
+                        <= self.longest_passing_s(a.min(motion[2].abs()))
             });
             self.release_rest(if passing { Rest::Passing } else { Rest::Hold });
         }
@@ -551,6 +551,11 @@ impl CoulombStage {
             }
         };
         self.subtract(i, s, friction_n);
+    }
+
+    /// The longest a passing through a reversal at acceleration `a` (mm/s^2) lasts (s).
+    fn longest_passing_s(&self, a: f64) -> f64 {
+        PASSING_FACTOR * self.band / a.abs().max(1e-12)
     }
 
     /// Emits the buffered rest, read as `how`.
@@ -1575,6 +1580,34 @@ impl Consistency {
 mod tests {
     use super::*;
 
+    /// A frictionless model with no cubic damping.
+    fn frictionless(law: crate::model::ExpLaw, m: f64, d1: f64) -> FrictionlessModel {
+        FrictionlessModel {
+            m_n_s2_per_mm: m,
+            d1_n_s_per_mm: d1,
+            d2_n_s3_per_mm3: 0.0,
+            law,
+        }
+    }
+
+    /// A seeded generator with the force and position sensors' noise.
+    fn sensors(
+        noise: &SensorNoise,
+        seed: u64,
+    ) -> (
+        rand::rngs::StdRng,
+        rand_distr::Normal<f64>,
+        rand_distr::Normal<f64>,
+    ) {
+        use rand::SeedableRng;
+        let normal = |var: f64| rand_distr::Normal::new(0.0, var.sqrt()).unwrap();
+        (
+            rand::rngs::StdRng::seed_from_u64(seed),
+            normal(noise.force_variance_n2),
+            normal(noise.position_variance_mm2),
+        )
+    }
+
     /// Every sample through the stage, in order, with its index.
     fn through_stage(
         stage: &mut CoulombStage,
@@ -1681,24 +1714,16 @@ mod tests {
     /// noise; with a choice of -d0, 0 or +d0 a band-crossing ramp left up to d0 / 2 in it.
     #[test]
     fn a_sticking_rod_leaves_the_spring_force_whatever_its_static_friction() {
-        use rand::{rngs::StdRng, SeedableRng};
-        use rand_distr::{Distribution, Normal};
+        use rand_distr::Distribution;
         let law = crate::model::ExpLaw {
             mu_n: 1.0,
             k2_per_mm: 0.25,
             f0_n: 30.0,
         };
-        let model = FrictionlessModel {
-            m_n_s2_per_mm: 0.3,
-            d1_n_s_per_mm: 1.5,
-            d2_n_s3_per_mm3: 0.0,
-            law,
-        };
+        let model = frictionless(law, 0.3, 1.5);
         let noise = SensorNoise::default();
         let (d0, x, dt) = (4.0, 8.0, 0.01);
-        let mut rng = StdRng::seed_from_u64(5);
-        let fn_noise = Normal::new(0.0, noise.force_variance_n2.sqrt()).unwrap();
-        let xn_noise = Normal::new(0.0, noise.position_variance_mm2.sqrt()).unwrap();
+        let (mut rng, fn_noise, xn_noise) = sensors(&noise, 5);
         // 10 s held at +d0, then 20 s of the friction falling to -0.8 d0 while the rod sticks.
         let friction = |t: f64| {
             if t < 10.0 {
@@ -1752,19 +1777,13 @@ mod tests {
     /// lagging the stop.
     #[test]
     fn a_held_rod_next_to_a_move_with_acceleration_steps_leaves_the_spring_force() {
-        use rand::{rngs::StdRng, SeedableRng};
-        use rand_distr::{Distribution, Normal};
+        use rand_distr::Distribution;
         let law = crate::model::ExpLaw {
             mu_n: 0.9251,
             k2_per_mm: 0.2586,
             f0_n: 13.75,
         };
-        let model = FrictionlessModel {
-            m_n_s2_per_mm: 0.39,
-            d1_n_s_per_mm: 1.84,
-            d2_n_s3_per_mm3: 0.0,
-            law,
-        };
+        let model = frictionless(law, 0.39, 1.84);
         let noise = SensorNoise::default();
         let (d0, dt, amax, vmax) = (3.82, 0.01, 5.6, 4.2);
         // Trapezoid from 5 to 10 mm starting at t0: accelerate for ta, cruise for tc.
@@ -1786,9 +1805,7 @@ mod tests {
                 (10.0, 0.0, 0.0)
             }
         };
-        let mut rng = StdRng::seed_from_u64(11);
-        let fn_noise = Normal::new(0.0, noise.force_variance_n2.sqrt()).unwrap();
-        let xn_noise = Normal::new(0.0, noise.position_variance_mm2.sqrt()).unwrap();
+        let (mut rng, fn_noise, xn_noise) = sensors(&noise, 11);
         let n = 1200;
         let mut stage = CoulombStage::new(
             d0,
