@@ -588,3 +588,112 @@ fn error_draws_have_identifications_covariance() {
         }
     }
 }
+
+/// A motion controller's point-to-point moves between random levels, with 1 s holds, on the
+/// paper's Table I transmission, its friction holding the rod at rest with the sign of the last
+/// motion: trapezoidal velocity (the acceleration steps at each move's four corners), its
+/// acceleration ramped over `jerk_s` when not zero (an S-curve controller's: the trapezoid
+/// averaged over `jerk_s`). Returns the log (100 Hz, the paper's sensor noise) and the truth in
+/// model order.
+fn motion_controller_log(seed: u64, jerk_s: f64) -> (CalibrationLog, [f64; 7]) {
+    let (m, d0, d1, d2, mu, f0, k2) = (0.39, 3.82, 1.84, -0.0108, 0.9251, 13.75, 0.2586);
+    let (vmax, amax, hold, rate, seconds): (f64, f64, f64, f64, f64) =
+        (6.0, 8.0, 1.0, 100.0, 300.0);
+    let mut rng = StdRng::seed_from_u64(seed);
+    let level = rand_distr::Uniform::new(1.8, 13.2).unwrap();
+    // Each move: start time, from, to, acceleration time, cruise time, peak speed.
+    let mut moves = Vec::new();
+    let (mut start, mut from) = (hold, level.sample(&mut rng));
+    while start < seconds + 1.0 {
+        let to: f64 = level.sample(&mut rng);
+        let d = (to - from).abs();
+        let (ta, tc, vp) = if vmax * vmax / amax > d {
+            ((d / amax).sqrt(), 0.0, (d * amax).sqrt())
+        } else {
+            (vmax / amax, (d - vmax * vmax / amax) / vmax, vmax)
+        };
+        moves.push((start, from, to, ta, tc, vp));
+        (start, from) = (start + 2.0 * ta + tc + hold, to);
+    }
+    let trapezoid = |t: f64| -> (f64, f64, f64) {
+        let k = moves.partition_point(|mv| mv.0 <= t);
+        if k == 0 {
+            return (moves[0].1, 0.0, 0.0);
+        }
+        let (start, from, to, ta, tc, vp) = moves[k - 1];
+        let (u, end, s) = (t - start, start + 2.0 * ta + tc, (to - from).signum());
+        if u < ta {
+            (from + s * 0.5 * amax * u * u, s * amax * u, s * amax)
+        } else if u < ta + tc {
+            (
+                from + s * (0.5 * amax * ta * ta + vp * (u - ta)),
+                s * vp,
+                0.0,
+            )
+        } else if t < end {
+            let r = end - t;
+            (to - s * 0.5 * amax * r * r, s * amax * r, -s * amax)
+        } else {
+            (to, 0.0, 0.0)
+        }
+    };
+    let force_noise = Normal::new(0.0, 0.017_f64.sqrt()).unwrap();
+    let position_noise = Normal::new(0.0, 0.01_f64.sqrt()).unwrap();
+    let mut log = CalibrationLog::default();
+    let mut sign = 1.0;
+    for i in 0..(seconds * rate) as usize {
+        let t = i as f64 / rate;
+        let (x, v, a) = if jerk_s > 0.0 {
+            // The average over [t - jerk_s, t] (midpoints of 50 parts).
+            let parts = 50;
+            (0..parts)
+                .map(|j| trapezoid(t - jerk_s * (j as f64 + 0.5) / parts as f64))
+                .fold((0.0, 0.0, 0.0), |acc, (x, v, a)| {
+                    let w = 1.0 / parts as f64;
+                    (acc.0 + w * x, acc.1 + w * v, acc.2 + w * a)
+                })
+        } else {
+            trapezoid(t)
+        };
+        if v.abs() > 1e-9 {
+            sign = v.signum();
+        }
+        let force = m * a + d0 * sign + d1 * v + d2 * v * v * v + mu * (k2 * x).exp() + f0;
+        log.t_s.push(t);
+        log.force_n.push(force + force_noise.sample(&mut rng));
+        log.position_mm.push(x + position_noise.sample(&mut rng));
+    }
+    (log, [m, d0, d1, d2, mu, f0, k2])
+}
+
+/// Identification on a motion controller's moves, trapezoidal and jerk-limited: the
+/// Savitzky-Golay window that rounds the acceleration's steps or ramps leaves a force the
+/// model cannot fit, and the window choice stops before it. (While the window was chosen by
+/// the estimates' agreement alone, it took 0.85 s on the independent rig's jerk-limited logs
+/// of this transmission, where the reduced chi-square had risen from 1.03 to 1.35 and m was
+/// 4.4 of its standard deviations high.)
+#[test]
+fn a_motion_controllers_moves_leave_every_estimate_within_three_sigma() {
+    for (seed, jerk_s) in [(0, 0.0), (1, 0.0), (2, 0.1), (3, 0.1), (4, 0.1)] {
+        let (log, truth) = motion_controller_log(seed, jerk_s);
+        let id = identify(&log, &SensorNoise::default()).unwrap();
+        assert_eq!(id.adequacy.status, FitStatus::Fits, "{:?}", id.adequacy);
+        assert!(
+            id.reduced_chi2 < 1.2,
+            "seed {seed}: reduced chi-square {:.3} at {:.2} s",
+            id.reduced_chi2,
+            id.sg_window_s
+        );
+        for (p, e) in id.parameters.iter() {
+            let (Some(v), Some(s)) = (e.value, e.std) else {
+                panic!("seed {seed}: {} not identified", p.key());
+            };
+            let z = (v - truth[p.index()]) / s;
+            assert!(
+                z.abs() < 3.0,
+                "seed {seed}: {} is {z:.2} sigma off",
+                p.key()
+            );
+        }
+    }
+}

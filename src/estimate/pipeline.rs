@@ -1508,10 +1508,10 @@ impl Consistency {
             if !off.is_empty() {
                 let d0 = id.get(Param::D0).value.unwrap_or(0.0).abs();
                 let noise = id.residual_rms_n;
-                // Only M off, and the filter's the more precise: identification's inertia leans
-                // high where the acceleration has corners its smoothing window cannot follow (on
-                // an independent rig's trapezoidal and S-curve moves and stick-slip, to 4.4 of its
-                // standard deviations, where the filter's M was within 1.8).
+                // Only M off, and the filter's the more precise: identification's inertia comes
+                // from a smoothed acceleration and can lean high (on an independent rig's logs,
+                // to 3.0 to 3.6 of its standard deviations on Table I's sines and stick-slip,
+                // where the filter's M was within 0.4 of its own).
                 let m_only = match agreement
                     .iter()
                     .filter(|a| a.sigmas > AGREEMENT_SIGMAS)
@@ -1523,10 +1523,10 @@ impl Consistency {
                     _ => false,
                 };
                 let cause = if m_only {
-                    "the filter resolves M more precisely than identification, whose inertia leans \
-                     high where the motion's acceleration steps or ramps faster than its smoothing \
-                     window follows (a motion controller's moves, stick-slip): if this log's motion \
-                     is of that kind, identification's M is the suspect one; k2 agrees, so use \
+                    "the filter resolves M more precisely than identification, whose inertia comes \
+                     from a smoothed acceleration and can lean high where the motion's acceleration \
+                     changes faster than the smoothing window follows (moves with sharp starts and \
+                     stops, stick-slip): identification's M is the suspect one; k2 agrees, so use \
                      identify's spring law either way"
                         .to_string()
                 } else if d0 > 5.0 * noise {
