@@ -890,9 +890,13 @@ where
     let (run, settings, stiffness_path) = match run_once(settings, sink) {
         Ok(done) => done,
         Err(EstimateError::Filter(EkfError::Diverged { sample, t_s, what })) => {
-            // A poor start: widen what the filter may learn (ten times the initial standard
-            // deviations of the impedance states and constants, ten times the process noise
-            // of the acceleration) and run again from the start, once.
+            // A poor start. First widen what the filter may learn (ten times the initial
+            // standard deviations of the impedance states and constants, ten times the process
+            // noise of the acceleration); if that fails too, hold the inertia and the cubic
+            // damping close to identification's values (a tenth of their initial standard
+            // deviations): where identification knows them only roughly (a short window, M to
+            // 14 % and d2 to 22 % on a Table I trapezoidal log at 0.43 s), their early swings
+            // made the filter lose the motion.
             let mut wide = settings;
             for i in [
                 ekf::idx::SIGMA,
@@ -904,29 +908,57 @@ where
                 wide.p0_std[i] *= 10.0;
             }
             wide.q[ekf::idx::XDD] *= 10.0;
-            sink.restart();
-            let done = match run_once(wide, sink) {
-                Ok(done) => done,
-                Err(EstimateError::Filter(second)) => {
+            let mut narrow = settings;
+            for i in [ekf::idx::M, ekf::idx::D2] {
+                narrow.p0_std[i] *= 0.1;
+            }
+            let attempts = [
+                (
+                    wide,
+                    "ten times the initial standard deviations of sigma, D, M, k2 and d2 and ten \
+                     times the process noise of the acceleration",
+                ),
+                (
+                    narrow,
+                    "a tenth of the initial standard deviations of M and d2 (held close to \
+                     identification's values)",
+                ),
+            ];
+            let mut failures = Vec::new();
+            let mut done = None;
+            for (attempt, how) in attempts {
+                sink.restart();
+                match run_once(attempt, sink) {
+                    Ok(d) => {
+                        recovery = Some(format!(
+                            "the filter diverged at sample {sample} (t = {t_s:.3} s: {what}); {}it \
+                             was run again from the start with {how}, and converged",
+                            failures
+                                .iter()
+                                .map(|f| format!("{f}; "))
+                                .collect::<String>()
+                        ));
+                        done = Some(d);
+                        break;
+                    }
+                    Err(EstimateError::Filter(e)) => {
+                        failures.push(format!("a run with {how} failed too ({e})"));
+                    }
+                    Err(e) => return Err(e),
+                }
+            }
+            match done {
+                Some(d) => d,
+                None => {
                     // Report the first divergence: the log's fault is most likely there.
                     return Err(EkfError::Diverged {
                         sample,
                         t_s,
-                        what: format!(
-                            "{what}; a second run with ten times the initial uncertainty failed \
-                             too ({second})"
-                        ),
+                        what: format!("{what}; {}", failures.join("; ")),
                     }
                     .into());
                 }
-                Err(e) => return Err(e),
-            };
-            recovery = Some(format!(
-                "the filter diverged at sample {sample} (t = {t_s:.3} s: {what}); it was run again \
-                 from the start with ten times the initial standard deviations of sigma, D, M, k2 \
-                 and d2 and ten times the process noise of the acceleration, and converged"
-            ));
-            done
+            }
         }
         Err(e) => return Err(e),
     };
