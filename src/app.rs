@@ -417,12 +417,37 @@ pub fn run_identify(
     log_path: &Path,
     map: &crate::estimate::log::ColumnMap,
     sampling_tolerance: f64,
-    noise: &crate::estimate::identify::SensorNoise,
+    noise: &crate::estimate::noise::GivenNoise,
     window_s: Option<f64>,
-) -> Result<(crate::estimate::identify::Identification, f64)> {
+) -> Result<IdentifyRun> {
     let surveyed = survey_log_file(log_path, map, sampling_tolerance, f64::INFINITY)?;
-    let id = crate::estimate::identify::identify_reduced(&surveyed.reduced, noise, window_s)?;
-    Ok((id, 1.0 / surveyed.dt_s))
+    let noise = noise.resolve(surveyed.noise.as_ref());
+    warn_noise(log_path, &noise);
+    let identification =
+        crate::estimate::identify::identify_reduced(&surveyed.reduced, &noise.noise, window_s)?;
+    Ok(IdentifyRun {
+        identification,
+        sample_rate_hz: 1.0 / surveyed.dt_s,
+        noise,
+    })
+}
+
+/// What `camspring identify` found.
+#[derive(Debug, Clone)]
+pub struct IdentifyRun {
+    /// The identification.
+    pub identification: crate::estimate::identify::Identification,
+    /// The log's sample rate (Hz).
+    pub sample_rate_hz: f64,
+    /// The sensor noise it weighted with, and where it came from.
+    pub noise: crate::estimate::noise::ResolvedNoise,
+}
+
+/// Prints the warnings of a run's sensor noise (a given variance the log contradicts).
+fn warn_noise(log_path: &Path, noise: &crate::estimate::noise::ResolvedNoise) {
+    for w in &noise.warnings {
+        eprintln!("warning: {}: {w}", log_path.display());
+    }
 }
 
 /// Where `camspring estimate` takes the filter's initial state from.
@@ -740,15 +765,19 @@ pub fn run_validate(
     };
     let tolerance = tolerance.unwrap_or(crate::verdict::validate::BAND_MODE_TOLERANCE);
     let mut log = read_log_file(log_path, map, sampling_tolerance, true)?;
+    // The sensor noise: as given, else from the log's own differences.
+    let resolved = opts
+        .noise
+        .resolve(crate::estimate::noise::log_noise(&log).as_ref());
+    warn_noise(log_path, &resolved);
+    let noise = resolved.noise;
     // The encoder zero: fitted against the design (auto) or given; taken out of the log here,
     // so that every verdict below sees the corrected positions.
     let offset_mm = match opts.position_offset {
         PositionOffset::None => None,
         PositionOffset::Mm(c) => Some(c),
         PositionOffset::Auto => Some(crate::estimate::pipeline::fit_offset_by_identification(
-            &log,
-            &opts.noise,
-            &designed,
+            &log, &noise, &designed,
         )?),
     };
     if let Some(c) = offset_mm {
@@ -756,6 +785,7 @@ pub fn run_validate(
     }
     let opts = &EstimateOptions {
         position_offset: PositionOffset::None,
+        noise: noise.into(),
         ..opts.clone()
     };
     let log_name = log_path
@@ -767,7 +797,7 @@ pub fn run_validate(
     let diagnosis = crate::verdict::diagnose::diagnose(
         &design,
         &log,
-        &opts.noise,
+        &noise,
         opts.window_s,
         PositionOffset::None,
     )
@@ -815,7 +845,7 @@ pub fn run_validate(
                 None => {
                     identified = crate::estimate::identify::identify_with_window(
                         &log,
-                        &opts.noise,
+                        &noise,
                         opts.window_s,
                     )?;
                     &identified
@@ -868,7 +898,7 @@ pub fn run_validate(
             v.coverage = Some(cov);
             v.diagnosis = diagnosis.clone();
             // The measured force-deflection points come from the quasi-static curve.
-            let points = validate_curve(&designed, &log, &opts.noise, tolerance, band.as_ref());
+            let points = validate_curve(&designed, &log, &noise, tolerance, band.as_ref());
             let force_svg = crate::render::calibration::force_points_svg(
                 &points,
                 &designed,
@@ -889,7 +919,7 @@ pub fn run_validate(
             (Verdict::Law(v), svg_text, html)
         }
         ForceLaw::Table(_) | ForceLaw::Polynomial(_) => {
-            let mut v = validate_curve(&designed, &log, &opts.noise, tolerance, band.as_ref());
+            let mut v = validate_curve(&designed, &log, &noise, tolerance, band.as_ref());
             v.position_offset_mm = offset_mm;
             if judge_strokes(&mut v.criteria, &mut v.band_exits) {
                 v.pass = !v.bins.is_empty() && v.criteria.iter().all(|c| c.pass);
@@ -1298,8 +1328,8 @@ pub struct DiagnoseOptions {
     pub map: crate::estimate::log::ColumnMap,
     /// Allowed sampling jitter.
     pub sampling_tolerance: f64,
-    /// Sensor noise.
-    pub noise: crate::estimate::identify::SensorNoise,
+    /// Sensor noise as given; a channel not given is taken from the log.
+    pub noise: crate::estimate::noise::GivenNoise,
     /// Savitzky-Golay window (s), or chosen from the data.
     pub window_s: Option<f64>,
     /// The encoder zero: as logged, given, or fitted.
@@ -1314,9 +1344,18 @@ fn diagnose_log(
 ) -> Result<(crate::design::Design, crate::verdict::diagnose::Diagnosis)> {
     let design = crate::design::design_with(spec, false)?;
     let log = read_log_file(log_path, &opts.map, opts.sampling_tolerance, true)?;
-    let diagnosis =
-        crate::verdict::diagnose::diagnose(&design, &log, &opts.noise, opts.window_s, opts.zero)
-            .map_err(|e| Error::Argument(format!("diagnose {}: {e}", log_path.display())))?;
+    let resolved = opts
+        .noise
+        .resolve(crate::estimate::noise::log_noise(&log).as_ref());
+    warn_noise(log_path, &resolved);
+    let diagnosis = crate::verdict::diagnose::diagnose(
+        &design,
+        &log,
+        &resolved.noise,
+        opts.window_s,
+        opts.zero,
+    )
+    .map_err(|e| Error::Argument(format!("diagnose {}: {e}", log_path.display())))?;
     Ok((design, diagnosis))
 }
 

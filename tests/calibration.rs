@@ -206,7 +206,8 @@ fn poor_excitation_names_the_parameters_this_log_cannot_identify() {
             "m_n_s2_per_mm".to_string()
         ]
     );
-    let text = camspring::render::calibration::format_identification(&id);
+    let noise = camspring::estimate::noise::GivenNoise::from(SensorNoise::default()).resolve(None);
+    let text = camspring::render::calibration::format_identification(&id, &noise);
     assert!(
         text.contains("not identifiable (poor excitation): d0_n, d2_n_s3_per_mm3, m_n_s2_per_mm"),
         "{text}"

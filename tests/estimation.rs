@@ -46,7 +46,8 @@ fn options(noise: Noise, discretization: Discretization) -> EstimateOptions {
         noise: SensorNoise {
             force_variance_n2: noise.force_variance_n2,
             position_variance_mm2: noise.position_variance_mm2,
-        },
+        }
+        .into(),
         window_s: None,
         outlier_sigmas: None,
         q: Vec::new(),

@@ -1,5 +1,9 @@
-//! The sensor noise of a log recorded at rest: Allan variance of force, position and the
-//! filtered force rate, and the white-noise levels identification weights with.
+//! The sensor noise that identification and the filter weight with: from a log recorded at
+//! rest (Allan variance of force, position and the filtered force rate, [`noise_model`]), from
+//! the calibration log itself (the scatter of its higher differences, [`DifferenceNoise`]), or
+//! given; and which of them a run used ([`GivenNoise::resolve`]).
+
+use serde::Serialize;
 
 use super::allan::{allan_variance, white_noise_fit, AllanPoint, WhiteNoiseFit};
 use super::identify::SensorNoise;
@@ -84,5 +88,485 @@ pub fn noise_model(log: &CalibrationLog) -> NoiseModel {
         force_rate_predicted_variance: predicted,
         dt_s: dt,
         window: diff.window(),
+    }
+}
+
+/// Most differences [`DifferenceNoise`] keeps per order: the first this many samples of a log
+/// (about 11 minutes at 100 Hz) fix the noise to about 0.8 %, in 0.8 MB per channel on any
+/// log.
+pub const DIFFERENCE_NOISE_SAMPLES: usize = 1 << 16;
+
+/// Fewest samples from which [`DifferenceNoise`] gives an estimate.
+pub const DIFFERENCE_NOISE_MIN_SAMPLES: usize = 64;
+
+/// The orders of difference [`DifferenceNoise`] tries.
+const DIFFERENCE_ORDERS: [usize; 3] = [2, 3, 4];
+
+/// Differences further than this many robust standard deviations from zero are taken as the
+/// motion's (a step in acceleration or force) and left out.
+const DIFFERENCE_CUT_SIGMAS: f64 = 4.0;
+
+/// The least share of the differences the cut may keep: normal noise loses 6e-5 of them, a
+/// motion's corners a few percent. A cut that takes more (differences mostly zero, as a
+/// quantised encoder's are) is not made.
+const DIFFERENCE_CUT_KEEPS: f64 = 0.9;
+
+/// The share of a normal variable's variance that lies within +-4 standard deviations
+/// (E[z^2; |z| <= 4] / P(|z| <= 4)), which corrects the cut.
+const DIFFERENCE_CUT_VARIANCE: f64 = 0.998_929;
+
+/// The white-noise variance of one channel from the scatter of its samples' k-th
+/// differences, in bounded memory as the samples stream.
+///
+/// White noise of variance s^2 gives a k-th difference of variance s^2 C(2k, k), whatever the
+/// motion, while a smooth motion sampled fast contributes almost nothing to it (at 100 Hz the
+/// third difference of a 0.6 Hz, 5 mm sine is 2e-4 mm). The motion's corners (a step in
+/// acceleration, or in a force) make a few large differences; a cut at
+/// [`DIFFERENCE_CUT_SIGMAS`] robust standard deviations (from the median absolute
+/// difference) leaves them out. The motion can only add to the scatter, so of orders 2, 3 and
+/// 4 the smallest estimate is taken.
+#[derive(Debug, Clone)]
+pub struct DifferenceNoise {
+    recent: [f64; 5],
+    seen: usize,
+    differences: [Vec<f32>; 3],
+}
+
+impl Default for DifferenceNoise {
+    fn default() -> Self {
+        DifferenceNoise {
+            recent: [0.0; 5],
+            seen: 0,
+            differences: [Vec::new(), Vec::new(), Vec::new()],
+        }
+    }
+}
+
+/// A white-noise variance estimated from a log's differences ([`DifferenceNoise`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct DifferenceEstimate {
+    /// The white-noise variance (unit^2).
+    pub variance: f64,
+    /// Its relative standard deviation (from the differences' count and correlation).
+    pub relative_std: f64,
+    /// The order of difference that gave it.
+    pub order: usize,
+    /// How many differences it rests on (after the cut).
+    pub differences: usize,
+}
+
+impl DifferenceNoise {
+    /// A new, empty estimator.
+    pub fn new() -> DifferenceNoise {
+        DifferenceNoise::default()
+    }
+
+    /// Adds the next sample.
+    pub fn push(&mut self, y: f64) {
+        if self.seen > DIFFERENCE_NOISE_SAMPLES {
+            return;
+        }
+        self.recent.rotate_right(1);
+        self.recent[0] = y;
+        self.seen += 1;
+        for (slot, &k) in DIFFERENCE_ORDERS.iter().enumerate() {
+            if self.seen > k {
+                // Single precision: a difference's own rounding, 6e-8 of it, is far below
+                // the estimate's spread.
+                self.differences[slot].push(difference(&self.recent, k) as f32);
+            }
+        }
+    }
+
+    /// The estimate, or `None` on fewer than [`DIFFERENCE_NOISE_MIN_SAMPLES`] samples or
+    /// non-finite ones.
+    pub fn estimate(&self) -> Option<DifferenceEstimate> {
+        if self.seen < DIFFERENCE_NOISE_MIN_SAMPLES {
+            return None;
+        }
+        DIFFERENCE_ORDERS
+            .iter()
+            .zip(&self.differences)
+            .filter_map(|(&k, d)| order_estimate(d, k))
+            .min_by(|a, b| a.variance.total_cmp(&b.variance))
+    }
+
+    /// The estimate of a whole series.
+    pub fn of(y: &[f64]) -> Option<DifferenceEstimate> {
+        let mut d = DifferenceNoise::new();
+        y.iter().for_each(|&v| d.push(v));
+        d.estimate()
+    }
+}
+
+/// The k-th difference of the newest k + 1 samples (`recent[0]` newest).
+fn difference(recent: &[f64; 5], k: usize) -> f64 {
+    (0..=k)
+        .map(|j| {
+            let sign = if j % 2 == 0 { 1.0 } else { -1.0 };
+            sign * binomial(k, j) * recent[j]
+        })
+        .sum()
+}
+
+fn binomial(n: usize, k: usize) -> f64 {
+    (0..k).fold(1.0, |c, i| c * (n - i) as f64 / (i + 1) as f64)
+}
+
+/// The white-noise variance from one order's differences (see [`DifferenceNoise`]).
+fn order_estimate(d: &[f32], k: usize) -> Option<DifferenceEstimate> {
+    if d.len() < DIFFERENCE_NOISE_MIN_SAMPLES / 2 || d.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    let d: Vec<f64> = d.iter().map(|&v| f64::from(v)).collect();
+    let mut abs: Vec<f64> = d.iter().map(|v| v.abs()).collect();
+    let mid = abs.len() / 2;
+    let (_, median, _) = abs.select_nth_unstable_by(mid, f64::total_cmp);
+    // The median absolute value of a normal variable is 0.6745 of its standard deviation.
+    let robust_std = *median / 0.674_489_750_196_081_7;
+    let cut = DIFFERENCE_CUT_SIGMAS * robust_std;
+    let (sum, kept) = d
+        .iter()
+        .filter(|v| v.abs() <= cut)
+        .fold((0.0, 0usize), |(s, n), v| (s + v * v, n + 1));
+    let (sum, kept, correction) = if kept as f64 >= DIFFERENCE_CUT_KEEPS * d.len() as f64 {
+        (sum, kept, DIFFERENCE_CUT_VARIANCE)
+    } else {
+        // Not normal: most differences are zero or nearly (a quantised encoder: at rest, or
+        // moving less than a step a sample), and the cut would take the steps for the
+        // motion's. All are kept.
+        (d.iter().map(|v| v * v).sum(), d.len(), 1.0)
+    };
+    if kept == 0 {
+        return None;
+    }
+    let gain = binomial(2 * k, k);
+    // The k-th differences of white noise are correlated over k lags:
+    // rho_l = (-1)^l C(2k, k + l) / C(2k, k); the mean square's variance is
+    // 2 sum_l rho_l^2 / n of its square.
+    let rho2: f64 = (1..=k)
+        .map(|l| (binomial(2 * k, k + l) / gain).powi(2))
+        .sum::<f64>()
+        * 2.0
+        + 1.0;
+    Some(DifferenceEstimate {
+        variance: sum / kept as f64 / correction / gain,
+        relative_std: (2.0 * rho2 / kept as f64).sqrt(),
+        order: k,
+        differences: kept,
+    })
+}
+
+/// The sensor noise of a calibration log from its own samples ([`DifferenceNoise`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct LogNoise {
+    /// The force's white noise (N^2).
+    pub force: DifferenceEstimate,
+    /// The position's white noise (mm^2).
+    pub position: DifferenceEstimate,
+}
+
+/// [`LogNoise`] accumulated as a log's samples stream.
+#[derive(Debug, Clone, Default)]
+pub struct LogNoiseSurvey {
+    force: DifferenceNoise,
+    position: DifferenceNoise,
+}
+
+impl LogNoiseSurvey {
+    /// Adds the next sample.
+    pub fn push(&mut self, force_n: f64, position_mm: f64) {
+        self.force.push(force_n);
+        self.position.push(position_mm);
+    }
+
+    /// The estimate (`None` on too short a log).
+    pub fn estimate(&self) -> Option<LogNoise> {
+        Some(LogNoise {
+            force: self.force.estimate()?,
+            position: self.position.estimate()?,
+        })
+    }
+}
+
+/// [`LogNoise`] of a log in memory.
+pub fn log_noise(log: &CalibrationLog) -> Option<LogNoise> {
+    let mut s = LogNoiseSurvey::default();
+    for (&f, &x) in log.force_n.iter().zip(&log.position_mm) {
+        s.push(f, x);
+    }
+    s.estimate()
+}
+
+/// The sensor noise a user gave (`--noise`, `--force-variance`, `--position-variance`); a
+/// channel left out is taken from the log ([`GivenNoise::resolve`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct GivenNoise {
+    /// Force variance (N^2), if given.
+    pub force_variance_n2: Option<f64>,
+    /// Position variance (mm^2), if given.
+    pub position_variance_mm2: Option<f64>,
+}
+
+impl From<SensorNoise> for GivenNoise {
+    fn from(n: SensorNoise) -> GivenNoise {
+        GivenNoise {
+            force_variance_n2: Some(n.force_variance_n2),
+            position_variance_mm2: Some(n.position_variance_mm2),
+        }
+    }
+}
+
+/// Where a channel's noise came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum NoiseOrigin {
+    /// Given by the user.
+    Given,
+    /// Estimated from the log's own differences ([`DifferenceNoise`]).
+    Log,
+    /// The paper's sensors (a log too short to estimate from).
+    Paper,
+}
+
+/// How far a given variance may exceed the log's own estimate (relative, besides four of the
+/// estimate's standard deviations) before [`GivenNoise::resolve`] warns. A position noise
+/// stated too high makes identification's errors-in-variables correction take out signal:
+/// at a window where noise is three quarters of the information, 10 % too much noise removes
+/// 30 % of the signal's.
+pub const GIVEN_NOISE_EXCESS: f64 = 0.1;
+
+/// How far below the log's own estimate a given variance may be before
+/// [`GivenNoise::resolve`] warns (the log's estimate also holds whatever of the motion its
+/// differences keep, so only a large shortfall is reported).
+pub const GIVEN_NOISE_SHORTFALL: f64 = 0.5;
+
+/// The sensor noise a run used, with where each channel's came from.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ResolvedNoise {
+    /// The variances used.
+    pub noise: SensorNoise,
+    /// Where the force's came from.
+    pub force_origin: NoiseOrigin,
+    /// Where the position's came from.
+    pub position_origin: NoiseOrigin,
+    /// The log's own estimate.
+    pub log: Option<LogNoise>,
+    /// Given variances that the log contradicts.
+    pub warnings: Vec<String>,
+}
+
+impl GivenNoise {
+    /// Resolves each channel: the given variance, else the log's own estimate, else the
+    /// paper's sensors. A given variance well above the log's estimate (its samples scatter
+    /// less than that: [`GIVEN_NOISE_EXCESS`]) or far below it ([`GIVEN_NOISE_SHORTFALL`])
+    /// is kept and warned about.
+    pub fn resolve(&self, log: Option<&LogNoise>) -> ResolvedNoise {
+        let paper = SensorNoise::default();
+        let mut warnings = Vec::new();
+        let mut channel = |given: Option<f64>,
+                           estimate: Option<&DifferenceEstimate>,
+                           paper: f64,
+                           what: &str,
+                           unit: &str,
+                           flag: &str| match (given, estimate) {
+            (Some(g), e) => {
+                if let Some(e) = e {
+                    let excess = GIVEN_NOISE_EXCESS + 4.0 * e.relative_std;
+                    if g > e.variance * (1.0 + excess) {
+                        warnings.push(format!(
+                            "the given {what} noise variance {g:.4e} {unit} is {:.2} times what \
+                             the log's samples scatter by ({:.4e} {unit}, from their differences); \
+                             too high a noise makes identification over-correct (m and the \
+                             damping come out too high): drop {flag} to use the log's own",
+                            g / e.variance,
+                            e.variance
+                        ));
+                    } else if g < e.variance * GIVEN_NOISE_SHORTFALL {
+                        warnings.push(format!(
+                            "the given {what} noise variance {g:.4e} {unit} is {:.2} times what \
+                             the log's samples scatter by ({:.4e} {unit}, from their \
+                             differences); the reported standard deviations may be too small: \
+                             drop {flag} to use the log's own",
+                            g / e.variance,
+                            e.variance
+                        ));
+                    }
+                }
+                (g, NoiseOrigin::Given)
+            }
+            (None, Some(e)) => (e.variance, NoiseOrigin::Log),
+            (None, None) => (paper, NoiseOrigin::Paper),
+        };
+        let (force, force_origin) = channel(
+            self.force_variance_n2,
+            log.map(|l| &l.force),
+            paper.force_variance_n2,
+            "force",
+            "N^2",
+            "--force-variance/--noise",
+        );
+        let (position, position_origin) = channel(
+            self.position_variance_mm2,
+            log.map(|l| &l.position),
+            paper.position_variance_mm2,
+            "position",
+            "mm^2",
+            "--position-variance/--noise",
+        );
+        ResolvedNoise {
+            noise: SensorNoise {
+                force_variance_n2: force.max(MIN_NOISE_VARIANCE),
+                position_variance_mm2: position.max(MIN_NOISE_VARIANCE),
+            },
+            force_origin,
+            position_origin,
+            log: log.copied(),
+            warnings,
+        }
+    }
+}
+
+/// The least variance (unit^2) a run weights with: a noise-free log (a simulation written
+/// exactly) still gets finite weights.
+pub const MIN_NOISE_VARIANCE: f64 = 1e-18;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A deterministic normal generator (Box-Muller on a 64-bit LCG), for tests only.
+    fn normals(seed: u64, n: usize) -> Vec<f64> {
+        let mut s = seed.wrapping_mul(6364136223846793005).wrapping_add(1);
+        let mut uniform = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((s >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+        };
+        (0..n)
+            .map(|_| {
+                let (u, v) = (uniform(), uniform());
+                (-2.0 * u.ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_differences_of_white_noise_give_its_variance_within_their_stated_spread() {
+        let mut z = Vec::new();
+        for seed in 0..20 {
+            let e = DifferenceNoise::of(
+                &normals(seed, 20_000)
+                    .iter()
+                    .map(|v| 0.3 * v)
+                    .collect::<Vec<_>>(),
+            )
+            .unwrap();
+            z.push((e.variance / 0.09 - 1.0) / e.relative_std);
+        }
+        let mean = z.iter().sum::<f64>() / z.len() as f64;
+        let rms = (z.iter().map(|v| v * v).sum::<f64>() / z.len() as f64).sqrt();
+        // The minimum over three strongly correlated orders sits a little low.
+        assert!(mean.abs() < 1.0, "mean z {mean}");
+        assert!(rms < 1.6 && rms > 0.4, "rms z {rms}");
+    }
+
+    #[test]
+    fn a_motion_with_steps_in_acceleration_leaves_the_position_noise_estimate_within_two_percent() {
+        // Point-to-point moves at 100 Hz: acceleration +-8 mm/s^2 in steps, noise 1 um rms.
+        let dt = 0.01;
+        let noise = normals(7, 30_000);
+        let (mut x, mut v) = (0.0_f64, 0.0_f64);
+        let y: Vec<f64> = (0..30_000)
+            .map(|i| {
+                let phase = (i as f64 * dt) % 4.0;
+                let a = match phase {
+                    p if p < 1.0 => 8.0,
+                    p if p < 2.0 => -8.0,
+                    p if p < 3.0 => -8.0,
+                    _ => 8.0,
+                };
+                v += a * dt;
+                x += v * dt;
+                x + 1e-3 * noise[i]
+            })
+            .collect();
+        let e = DifferenceNoise::of(&y).unwrap();
+        assert!(
+            (e.variance / 1e-6 - 1.0).abs() < 0.02,
+            "variance {} against 1e-6",
+            e.variance
+        );
+    }
+
+    #[test]
+    fn a_quantised_encoder_without_noise_gives_its_quantisation_variance() {
+        // A slow ramp read by a 5 um encoder: the error is uniform over a step, variance
+        // step^2 / 12 while it moves; most second differences are zero.
+        let step = 0.005;
+        let y: Vec<f64> = (0..20_000)
+            .map(|i| {
+                let x = 2.0 + 1.5 * (i as f64 * 0.01 * 0.3).sin();
+                (x / step).round() * step
+            })
+            .collect();
+        let e = DifferenceNoise::of(&y).unwrap();
+        let uniform = step * step / 12.0;
+        assert!(
+            e.variance > 0.5 * uniform && e.variance < 1.5 * uniform,
+            "variance {} against {uniform}",
+            e.variance
+        );
+    }
+
+    #[test]
+    fn an_unchanging_quantised_signal_gives_zero_and_the_resolution_floors_it() {
+        let e = DifferenceNoise::of(&[2.5; 200]).unwrap();
+        assert_eq!(e.variance, 0.0);
+        let log = LogNoise {
+            force: e,
+            position: e,
+        };
+        let r = GivenNoise::default().resolve(Some(&log));
+        assert_eq!(r.noise.position_variance_mm2, MIN_NOISE_VARIANCE);
+        assert_eq!(r.position_origin, NoiseOrigin::Log);
+    }
+
+    #[test]
+    fn a_given_noise_far_above_the_logs_is_kept_and_warned_about() {
+        let e = DifferenceEstimate {
+            variance: 1e-4,
+            relative_std: 0.01,
+            order: 3,
+            differences: 30_000,
+        };
+        let log = LogNoise {
+            force: DifferenceEstimate {
+                variance: 0.017,
+                ..e
+            },
+            position: e,
+        };
+        let given = GivenNoise {
+            force_variance_n2: None,
+            position_variance_mm2: Some(0.01),
+        };
+        let r = given.resolve(Some(&log));
+        assert_eq!(r.noise.position_variance_mm2, 0.01);
+        assert_eq!(r.noise.force_variance_n2, 0.017);
+        assert_eq!(r.force_origin, NoiseOrigin::Log);
+        assert_eq!(r.warnings.len(), 1);
+        assert!(r.warnings[0].contains("100.00 times"), "{}", r.warnings[0]);
+        // Within the allowance: no warning.
+        let close = GivenNoise {
+            position_variance_mm2: Some(1.1e-4),
+            ..given
+        };
+        assert!(close.resolve(Some(&log)).warnings.is_empty());
+        // No log estimate: the paper's sensors.
+        let none = GivenNoise::default().resolve(None);
+        assert_eq!(none.noise, SensorNoise::default());
+        assert_eq!(none.position_origin, NoiseOrigin::Paper);
     }
 }

@@ -16,6 +16,7 @@ use super::identify::{
     SensorNoise, MAX_IDENTIFY_SAMPLES,
 };
 use super::log::{CalibrationLog, LogError, Sample};
+use super::noise::{GivenNoise, LogNoise, LogNoiseSurvey, ResolvedNoise};
 use super::sg;
 use super::twin::{self, TwinBias, TwinSource, TwinTruth};
 use crate::model::{ExpLaw, ForceLaw};
@@ -97,8 +98,9 @@ pub struct EstimateOptions {
     pub discretization: ekf::Discretization,
     /// Force-rate input.
     pub force_rate: ekf::ForceRate,
-    /// Sensor noise (R and the force-rate noise).
-    pub noise: SensorNoise,
+    /// Sensor noise (R and the force-rate noise): what was given; a channel not given is
+    /// taken from the log's own differences ([`GivenNoise::resolve`]).
+    pub noise: GivenNoise,
     /// Identification window (s), when identifying.
     pub window_s: Option<f64>,
     /// Innovations beyond this many standard deviations count as outliers; 50 in a row stop
@@ -130,12 +132,12 @@ pub const DEFAULT_IDENTIFY_SPAN_S: f64 = 3600.0;
 
 impl EstimateOptions {
     /// Identification init, RK4, zero-phase force rate, the given sensors, no overrides.
-    pub fn new(noise: SensorNoise) -> EstimateOptions {
+    pub fn new(noise: impl Into<GivenNoise>) -> EstimateOptions {
         EstimateOptions {
             init: EstimateInit::Identify,
             discretization: ekf::Discretization::Rk4,
             force_rate: ekf::ForceRate::ZeroPhase,
-            noise,
+            noise: noise.into(),
             window_s: None,
             outlier_sigmas: None,
             q: Vec::new(),
@@ -174,6 +176,8 @@ pub struct EstimateRun {
     /// identification: the part that a longer log of the same kind shrinks as
     /// 1 / sqrt(duration).
     pub std_before_disagreement: ekf::State,
+    /// The sensor noise used, and where each channel's came from.
+    pub noise: ResolvedNoise,
 }
 
 /// A constant the filter determines less precisely than [`FILTER_TARGET_PRECISION`].
@@ -622,6 +626,9 @@ pub struct LogSurvey {
     pub position_range_mm: (f64, f64),
     /// Identification's samples: block means over the first [`EstimateOptions::identify_span_s`].
     pub reduced: ReducedLog,
+    /// The sensor noise from the log's own differences (first
+    /// [`super::noise::DIFFERENCE_NOISE_SAMPLES`] samples); None on too short a log.
+    pub noise: Option<LogNoise>,
 }
 
 /// The first pass over a log's samples ([`LogSurvey`]): identification keeps the block means
@@ -634,8 +641,10 @@ pub fn survey<E>(
     let mut first: Option<Sample> = None;
     let (mut n, mut t_last) = (0usize, f64::NAN);
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    let mut noise = LogNoiseSurvey::default();
     for sample in samples {
         let s = sample?;
+        noise.push(s.force_n, s.position_mm);
         match (&mut reduction, first) {
             (Some(r), _) => r.push(s),
             (None, None) => first = Some(s),
@@ -676,6 +685,7 @@ pub fn survey<E>(
         },
         position_range_mm: (lo, hi),
         reduced,
+        noise: noise.estimate(),
     })
 }
 
@@ -740,7 +750,8 @@ pub fn estimate_stream<I>(
 where
     I: Iterator<Item = Result<Sample, LogError>>,
 {
-    let noise = &opts.noise;
+    let resolved = opts.noise.resolve(survey.noise.as_ref());
+    let noise = &resolved.noise;
     if survey.samples < 3 || !survey.dt_s.is_finite() {
         return Err(EkfError::Input(format!(
             "{} samples; the filter needs at least 3 with force and position",
@@ -1009,6 +1020,7 @@ where
         position_offset_mm: (offset_mm != 0.0).then_some(offset_mm),
         twins,
         std_before_disagreement,
+        noise: resolved,
     })
 }
 

@@ -7,8 +7,8 @@ use serde_json::{json, Map, Value};
 
 use super::plot::{self, Panel, Series};
 use crate::estimate::ekf::{idx, EkfRow, EkfRun, EkfSettings, STATE_NAMES};
-use crate::estimate::identify::{Identification, Param, SensorNoise, WindowMethod};
-use crate::estimate::noise::NoiseModel;
+use crate::estimate::identify::{Identification, Param, WindowMethod};
+use crate::estimate::noise::{NoiseModel, NoiseOrigin, ResolvedNoise};
 use crate::estimate::pipeline::EstimateRun;
 use crate::verdict::validate::{spring_force_n, CurveValidation, Validation};
 
@@ -141,7 +141,11 @@ pub fn allan_svg(model: &NoiseModel) -> String {
 }
 
 /// `camspring identify --json`: parameters under unit-bearing keys, each with `_std`.
-pub fn identification_json(id: &Identification, noise: &SensorNoise, sample_rate_hz: f64) -> Value {
+pub fn identification_json(
+    id: &Identification,
+    noise: &ResolvedNoise,
+    sample_rate_hz: f64,
+) -> Value {
     let mut params = Map::new();
     for (p, e) in id.parameters.iter() {
         let name = p.key();
@@ -177,15 +181,44 @@ pub fn identification_json(id: &Identification, noise: &SensorNoise, sample_rate
             "whiteness": id.adequacy.whiteness,
             "reasons": id.adequacy.reasons,
         },
-        "noise": {
-            "force_variance_n2": noise.force_variance_n2,
-            "position_variance_mm2": noise.position_variance_mm2,
-        },
+        "noise": sensor_noise_json(noise),
     })
 }
 
+/// The sensor noise a run weighted with, where each channel's came from, and the log's own
+/// estimate (JSON).
+pub fn sensor_noise_json(noise: &ResolvedNoise) -> Value {
+    json!({
+        "force_variance_n2": noise.noise.force_variance_n2,
+        "position_variance_mm2": noise.noise.position_variance_mm2,
+        "force_origin": noise.force_origin,
+        "position_origin": noise.position_origin,
+        "log_force_variance_n2": noise.log.map(|l| l.force.variance),
+        "log_force_variance_relative_std": noise.log.map(|l| l.force.relative_std),
+        "log_position_variance_mm2": noise.log.map(|l| l.position.variance),
+        "log_position_variance_relative_std": noise.log.map(|l| l.position.relative_std),
+        "warnings": noise.warnings,
+    })
+}
+
+/// One line on the sensor noise a run weighted with and where it came from.
+pub fn format_sensor_noise(noise: &ResolvedNoise) -> String {
+    let origin = |o: NoiseOrigin| match o {
+        NoiseOrigin::Given => "given",
+        NoiseOrigin::Log => "from the log's differences",
+        NoiseOrigin::Paper => "the paper's sensors; the log is too short to estimate it",
+    };
+    format!(
+        "  sensor noise: force {:.3e} N^2 ({}), position {:.3e} mm^2 ({})\n",
+        noise.noise.force_variance_n2,
+        origin(noise.force_origin),
+        noise.noise.position_variance_mm2,
+        origin(noise.position_origin)
+    )
+}
+
 /// The text summary of `camspring identify`.
-pub fn format_identification(id: &Identification) -> String {
+pub fn format_identification(id: &Identification, noise: &ResolvedNoise) -> String {
     let units = [
         ("m", "N s^2/mm"),
         ("d0", "N"),
@@ -279,11 +312,15 @@ pub fn format_identification(id: &Identification) -> String {
         Some(w) => {
             let _ = writeln!(
                 s,
-                "  residual whiteness: statistic {:.1} over {} lags of {} samples, p = {:.2} ({})",
+                "  residual whiteness: statistic {:.1} over {} lags of {} samples, p = {} ({})",
                 w.statistic,
                 w.lags,
                 w.lag_spacing_samples,
-                w.p_value,
+                if w.p_value >= 0.01 {
+                    format!("{:.2}", w.p_value)
+                } else {
+                    format!("{:.1e}", w.p_value)
+                },
                 if w.p_value < crate::estimate::identify::WHITENESS_LEVEL {
                     "coloured"
                 } else {
@@ -295,6 +332,7 @@ pub fn format_identification(id: &Identification) -> String {
             let _ = writeln!(s, "  residual whiteness: too few samples to test");
         }
     }
+    s.push_str(&format_sensor_noise(noise));
     s
 }
 
@@ -355,6 +393,7 @@ pub fn estimate_json(est: &EstimateRun) -> Value {
         "t_end_s": run.t_end_s,
         "samples": run.samples,
         "position_offset_mm": est.position_offset_mm,
+        "noise": sensor_noise_json(&est.noise),
         "first_sample": run.first_sample,
         "outliers": run.outliers,
         "held": held_states(settings),
@@ -510,6 +549,7 @@ pub fn format_estimate(est: &EstimateRun) -> String {
             run.outliers
         );
     }
+    s.push_str(&format_sensor_noise(&est.noise));
     s
 }
 

@@ -7,10 +7,11 @@
 use std::fmt;
 
 use camspring::estimate::identify::{Identification, Param};
+use camspring::estimate::noise::{log_noise, GivenNoise};
 use camspring::estimate::sim::{simulate, Dynamics, Profile, SimSettings};
 use camspring::model::ExpLaw;
 use camspring::verdict::validate::validate_with;
-use camspring::{estimate, EstimateOptions, SensorNoise};
+use camspring::{estimate, EstimateOptions};
 
 /// Stroke of the simulated spring (mm).
 pub const XMAX_MM: f64 = 15.0;
@@ -261,15 +262,19 @@ pub fn run_case(case: &Case) -> Outcome {
         outcome.error = Some("no speed is feasible".into());
         return outcome;
     };
+    // As `camspring estimate` does by default: the sensor noise from the log's own differences.
     let run = match estimate(
         &log,
-        &EstimateOptions::new(SensorNoise::default()),
+        &EstimateOptions::new(GivenNoise::default()),
         |_, _| {},
     ) {
         Ok(run) => run,
         Err(e) => {
             // Identification alone, to tell what failed.
-            match camspring::estimate::identify::identify(&log, &SensorNoise::default()) {
+            let noise = GivenNoise::default()
+                .resolve(log_noise(&log).as_ref())
+                .noise;
+            match camspring::estimate::identify::identify(&log, &noise) {
                 Ok(id) => {
                     record_identification(&mut outcome, &id, &law, case);
                     outcome.ekf = Err(e.to_string());

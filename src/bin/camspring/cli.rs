@@ -475,13 +475,14 @@ pub struct CalibrationArgs {
 /// Sensor noise and filter window for identification and estimation.
 #[derive(clap::Args, Debug)]
 pub struct Sensors {
-    /// Sensor noise from `camspring noise --json` (default: the paper's sensors).
+    /// Sensor noise from `camspring noise --json` (default: estimated from the log's own
+    /// higher differences; the paper's sensors on a log too short for that).
     #[arg(long)]
     pub noise: Option<PathBuf>,
-    /// Force noise variance in N^2 (overrides --noise).
+    /// Force noise variance in N^2 (overrides --noise and the log's own estimate).
     #[arg(long, value_parser = variance)]
     pub force_variance: Option<f64>,
-    /// Position noise variance in mm^2 (overrides --noise).
+    /// Position noise variance in mm^2 (overrides --noise and the log's own estimate).
     #[arg(long, value_parser = variance)]
     pub position_variance: Option<f64>,
     /// Savitzky-Golay window, e.g. 0.8s (default about 0.4 s); longer for slow runs.

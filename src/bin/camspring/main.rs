@@ -23,6 +23,7 @@ use camspring::app::{
 use camspring::cam::checks::Status;
 use camspring::estimate::identify::FitStatus;
 use camspring::estimate::log::{parse_column, parse_time_column, ColumnMap};
+use camspring::estimate::noise::GivenNoise;
 use camspring::estimate::sim::{Dynamics, Noise, SimSettings};
 use camspring::export::ExportError;
 use camspring::render::calibration::{
@@ -32,7 +33,7 @@ use camspring::render::calibration::{
 };
 use camspring::render::design::format_design;
 use camspring::units::Dimension;
-use camspring::{Error, EstimateOptions, SensorNoise};
+use camspring::{Error, EstimateOptions};
 
 use cli::{BuildFitArgs, CalibrationArgs, Cli, Columns, Command, FilterArgs, Sensors};
 
@@ -183,16 +184,16 @@ fn to_json(v: &impl serde::Serialize) -> Result<String, Error> {
     })
 }
 
-fn sensors(s: &Sensors) -> Result<SensorNoise, Error> {
+fn sensors(s: &Sensors) -> Result<GivenNoise, Error> {
     let mut sensor = match &s.noise {
-        Some(p) => load_noise_json(p)?,
-        None => SensorNoise::default(),
+        Some(p) => GivenNoise::from(load_noise_json(p)?),
+        None => GivenNoise::default(),
     };
     if let Some(v) = s.force_variance {
-        sensor.force_variance_n2 = v;
+        sensor.force_variance_n2 = Some(v);
     }
     if let Some(v) = s.position_variance {
-        sensor.position_variance_mm2 = v;
+        sensor.position_variance_mm2 = Some(v);
     }
     Ok(sensor)
 }
@@ -520,16 +521,16 @@ fn main() -> ExitCode {
             (|| {
                 let map = columns(&c)?;
                 let sensor = sensors(&s)?;
-                let (id, rate_hz) =
-                    run_identify(&log, &map, c.sampling_tolerance, &sensor, s.window)?;
+                let run = run_identify(&log, &map, c.sampling_tolerance, &sensor, s.window)?;
+                let id = &run.identification;
                 let code = if id.adequacy.status == FitStatus::DoesNotFit {
                     EXIT_CHECK_FAILED
                 } else {
                     EXIT_OK
                 };
                 Ok(Report::of_checks(
-                    format_identification(&id),
-                    to_json(&identification_json(&id, &sensor, rate_hz))?,
+                    format_identification(id, &run.noise),
+                    to_json(&identification_json(id, &run.noise, run.sample_rate_hz))?,
                     code,
                 ))
             })(),
