@@ -31,7 +31,8 @@
 //! - outputs: [`plan`], [`Outputs`], [`DesignSummary`], and the writers [`write_design`] and
 //!   [`write_atomic`];
 //! - calibration: [`read_log`], [`ColumnMap`], [`CalibrationLog`], [`identify`],
-//!   [`SensorNoise`], [`estimate()`], [`EstimateOptions`], [`validate`], [`Validation`].
+//!   [`SensorNoise`], [`GivenNoise`], [`estimate()`], [`EstimateOptions`], [`validate`],
+//!   [`Validation`].
 //!
 //! ```
 //! use camspring::{design, plan, spec::DEFAULT_SPEC_TOML, Spec};
@@ -66,6 +67,7 @@ pub use design::{design, Design, DesignError};
 pub use error::Error;
 pub use estimate::identify::{identify, Identification, SensorNoise};
 pub use estimate::log::{read_log, CalibrationLog, ColumnMap};
+pub use estimate::noise::GivenNoise;
 pub use estimate::pipeline::{estimate, EstimateInit, EstimateOptions, EstimateRun};
 pub use export::{write_atomic, write_design};
 pub use model::{

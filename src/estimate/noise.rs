@@ -100,20 +100,20 @@ pub const DIFFERENCE_NOISE_SAMPLES: usize = 1 << 16;
 pub const DIFFERENCE_NOISE_MIN_SAMPLES: usize = 64;
 
 /// The orders of difference [`DifferenceNoise`] tries.
-const DIFFERENCE_ORDERS: [usize; 3] = [2, 3, 4];
+pub const DIFFERENCE_ORDERS: [usize; 3] = [2, 3, 4];
 
 /// Differences further than this many robust standard deviations from zero are taken as the
 /// motion's (a step in acceleration or force) and left out.
-const DIFFERENCE_CUT_SIGMAS: f64 = 4.0;
+pub const DIFFERENCE_CUT_SIGMAS: f64 = 4.0;
 
 /// The least share of the differences the cut may keep: normal noise loses 6e-5 of them, a
 /// motion's corners a few percent. A cut that takes more (differences mostly zero, as a
 /// quantised encoder's are) is not made.
-const DIFFERENCE_CUT_KEEPS: f64 = 0.9;
+pub const DIFFERENCE_CUT_KEEPS: f64 = 0.9;
 
 /// The share of a normal variable's variance that lies within +-4 standard deviations
 /// (E[z^2; |z| <= 4] / P(|z| <= 4)), which corrects the cut.
-const DIFFERENCE_CUT_VARIANCE: f64 = 0.998_929;
+pub const DIFFERENCE_CUT_VARIANCE: f64 = 0.998_929;
 
 /// The white-noise variance of one channel from the scatter of its samples' k-th
 /// differences, in bounded memory as the samples stream.
