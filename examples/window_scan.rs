@@ -54,10 +54,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         law.k2_per_mm,
     ];
     let noise = if std::env::var("NOISEFREE").is_ok() {
-        SensorNoise {
-            force_variance_n2: 1e-14,
-            position_variance_mm2: 1e-14,
-        }
+        SensorNoise::new(1e-14, 1e-14)
     } else {
         SensorNoise::default()
     };

@@ -404,10 +404,10 @@ pub fn load_noise_json(path: &Path) -> Result<crate::estimate::identify::SensorN
                 ))
             })
     };
-    Ok(crate::estimate::identify::SensorNoise {
-        force_variance_n2: get("force", "white_noise_variance_n2")?,
-        position_variance_mm2: get("position", "white_noise_variance_mm2")?,
-    })
+    Ok(crate::estimate::identify::SensorNoise::new(
+        get("force", "white_noise_variance_n2")?,
+        get("position", "white_noise_variance_mm2")?,
+    ))
 }
 
 /// Runs `camspring identify` on a log file, read as a stream: only identification's samples

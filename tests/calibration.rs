@@ -158,14 +158,7 @@ fn noise_free_logs_give_the_parameters_without_filter_bias() {
     };
     let law = common::paper_law();
     let (log, truth) = simulate(law, XMAX_MM, FMAX_N, &settings).unwrap();
-    let id = identify(
-        &log,
-        &SensorNoise {
-            force_variance_n2: 1e-14,
-            position_variance_mm2: 1e-14,
-        },
-    )
-    .unwrap();
+    let id = identify(&log, &SensorNoise::new(1e-14, 1e-14)).unwrap();
     let t = truth_values(truth.law.exponential().unwrap(), &truth.dynamics);
     for (p, e) in id.parameters.iter() {
         let (k, name) = (p.index(), p.key());
@@ -695,6 +688,45 @@ fn a_motion_controllers_moves_leave_every_estimate_within_three_sigma() {
                 "seed {seed}: {} is {z:.2} sigma off",
                 p.key()
             );
+        }
+    }
+}
+
+#[test]
+fn an_uncertain_position_noise_widens_each_estimate_by_what_it_moves() {
+    // The same log and window, with the position variance known exactly and known to 30 %:
+    // each estimate's added variance is its change under a variance 30 % higher, which a
+    // separate fit at that variance gives independently.
+    let (log, _) = run(Profile::Steps, 120.0, 3, 0.0);
+    let exact = SensorNoise::default();
+    let uncertain = SensorNoise {
+        position_variance_relative_std: 0.3,
+        ..exact
+    };
+    let raised = SensorNoise::new(exact.force_variance_n2, 1.3 * exact.position_variance_mm2);
+    let window = Some(0.61);
+    let a = identify_with_window(&log, &exact, window).unwrap();
+    let b = identify_with_window(&log, &uncertain, window).unwrap();
+    let c = identify_with_window(&log, &raised, window).unwrap();
+    assert_eq!(a.noise_std, [0.0; 7]);
+    let m = Param::M;
+    let (Some(va), Some(sa), Some(sb), Some(vc)) =
+        (a.get(m).value, a.get(m).std, b.get(m).std, c.get(m).value)
+    else {
+        panic!("m is identifiable on steps");
+    };
+    let change = (vc - va).abs();
+    assert!(change > 0.0);
+    assert!(
+        (b.noise_std[m.index()] / change - 1.0).abs() < 1e-9,
+        "{} against {change}",
+        b.noise_std[m.index()]
+    );
+    assert!((sb * sb - (sa * sa + change * change)).abs() < 1e-12 * sb * sb);
+    // Every parameter is at least as uncertain as with the noise known.
+    for p in Param::ALL {
+        if let (Some(sa), Some(sb)) = (a.get(p).std, b.get(p).std) {
+            assert!(sb >= sa, "{p:?}: {sb} < {sa}");
         }
     }
 }

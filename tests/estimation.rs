@@ -43,11 +43,7 @@ fn options(noise: Noise, discretization: Discretization) -> EstimateOptions {
         init: EstimateInit::Identify,
         discretization,
         force_rate: ForceRate::ZeroPhase,
-        noise: SensorNoise {
-            force_variance_n2: noise.force_variance_n2,
-            position_variance_mm2: noise.position_variance_mm2,
-        }
-        .into(),
+        noise: SensorNoise::new(noise.force_variance_n2, noise.position_variance_mm2).into(),
         window_s: None,
         outlier_sigmas: None,
         q: Vec::new(),

@@ -1101,10 +1101,7 @@ mod tests {
             d1_n_s_per_mm: (0.2, 0.02),
             d2_n_s3_per_mm3: (0.0, 0.0),
         };
-        let noise = crate::estimate::identify::SensorNoise {
-            force_variance_n2: 1e-3,
-            position_variance_mm2: 1e-4,
-        };
+        let noise = crate::estimate::identify::SensorNoise::new(1e-3, 1e-4);
         let settings = default_settings(
             &init,
             &noise,

@@ -41,8 +41,9 @@ pub use super::adequacy::{
 use super::log::{CalibrationLog, MIN_LOG_SAMPLES};
 use super::sg::{self, Differentiator};
 pub use super::window::{
-    candidate_windows, choose_window, WindowCandidate, WindowChoice, WindowMethod,
-    BALANCING_SIGMAS, LONGEST_WINDOW_S, SHORTEST_WINDOW_S, SHORTEST_WINDOW_SAMPLES, WINDOW_RATIO,
+    candidate_windows, choose_window, fit_with_noise_uncertainty, WindowCandidate, WindowChoice,
+    WindowMethod, BALANCING_SIGMAS, LONGEST_WINDOW_S, SHORTEST_WINDOW_S, SHORTEST_WINDOW_SAMPLES,
+    WINDOW_RATIO,
 };
 
 /// Parameter names in model order (the JSON keys, with units).
@@ -135,15 +136,27 @@ pub struct SensorNoise {
     pub force_variance_n2: f64,
     /// Position variance (mm^2).
     pub position_variance_mm2: f64,
+    /// The position variance's relative standard deviation (0: known exactly). Beyond
+    /// [`super::window::NOISE_UNCERTAINTY_MIN`] identification carries it into its estimates'
+    /// standard deviations (`noise_std`).
+    pub position_variance_relative_std: f64,
+}
+
+impl SensorNoise {
+    /// Force and position variances known exactly.
+    pub fn new(force_variance_n2: f64, position_variance_mm2: f64) -> SensorNoise {
+        SensorNoise {
+            force_variance_n2,
+            position_variance_mm2,
+            position_variance_relative_std: 0.0,
+        }
+    }
 }
 
 impl Default for SensorNoise {
     /// The paper's sensors: force 0.017 N^2, position 0.01 mm^2.
     fn default() -> Self {
-        SensorNoise {
-            force_variance_n2: 0.017,
-            position_variance_mm2: 0.01,
-        }
+        SensorNoise::new(0.017, 0.01)
     }
 }
 
@@ -248,6 +261,10 @@ pub struct Identification {
     /// The filter's estimated bias in each parameter, in model order, already included in the
     /// standard deviations (zero when the window was given, or none was seen).
     pub filter_bias_std: [f64; 7],
+    /// What the position noise's uncertainty does to each parameter, in model order, already
+    /// included in the standard deviations (zero when the noise is known well enough,
+    /// [`super::window::NOISE_UNCERTAINTY_MIN`]).
+    pub noise_std: [f64; 7],
 }
 
 /// The precision the calibration of a spring law aims at: k2 within 0.5 % and mu within
@@ -958,6 +975,7 @@ pub fn identify_reduced(
     let block_noise = SensorNoise {
         force_variance_n2: noise.force_variance_n2 / b,
         position_variance_mm2: noise.position_variance_mm2 / b,
+        ..*noise
     };
     let mut id = identify_samples(&reduced.log, &block_noise, window_s)?;
     id.log_samples = reduced.log_samples;
@@ -992,7 +1010,7 @@ fn identify_samples(
         });
     }
     let samples = ((w / dt).round().clamp(0.0, 1e6) as usize) | 1;
-    let mut id = fit(log, noise, &Differentiator::new(samples))?;
+    let mut id = fit_with_noise_uncertainty(log, noise, &Differentiator::new(samples))?;
     id.window_choice = WindowChoice {
         method: WindowMethod::Given,
         candidates: Vec::new(),
@@ -1228,6 +1246,7 @@ pub(super) fn fit(
         },
         adequacy,
         filter_bias_std: [0.0; 7],
+        noise_std: [0.0; 7],
         signal_share,
     })
 }

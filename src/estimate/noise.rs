@@ -46,6 +46,7 @@ impl NoiseModel {
         SensorNoise {
             force_variance_n2: self.channels[0].fit.variance,
             position_variance_mm2: self.channels[1].fit.variance,
+            position_variance_relative_std: 0.0,
         }
     }
 }
@@ -130,6 +131,8 @@ pub struct DifferenceNoise {
     recent: [f64; 5],
     seen: usize,
     differences: [Vec<f32>; 3],
+    /// First differences, for the quantisation step ([`lattice_step`]).
+    steps: Vec<f32>,
 }
 
 impl Default for DifferenceNoise {
@@ -138,6 +141,7 @@ impl Default for DifferenceNoise {
             recent: [0.0; 5],
             seen: 0,
             differences: [Vec::new(), Vec::new(), Vec::new()],
+            steps: Vec::new(),
         }
     }
 }
@@ -153,6 +157,10 @@ pub struct DifferenceEstimate {
     pub order: usize,
     /// How many differences it rests on (after the cut).
     pub differences: usize,
+    /// The step of a quantised signal whose quantisation error dominates its noise (the
+    /// variance then lies between the differences' estimate and step^2 / 12, see
+    /// [`DifferenceNoise`]).
+    pub quantum: Option<f64>,
 }
 
 impl DifferenceNoise {
@@ -169,6 +177,9 @@ impl DifferenceNoise {
         self.recent.rotate_right(1);
         self.recent[0] = y;
         self.seen += 1;
+        if self.seen > 1 {
+            self.steps.push((self.recent[0] - self.recent[1]) as f32);
+        }
         for (slot, &k) in DIFFERENCE_ORDERS.iter().enumerate() {
             if self.seen > k {
                 // Single precision: a difference's own rounding, 6e-8 of it, is far below
@@ -184,11 +195,29 @@ impl DifferenceNoise {
         if self.seen < DIFFERENCE_NOISE_MIN_SAMPLES {
             return None;
         }
-        DIFFERENCE_ORDERS
+        let white = DIFFERENCE_ORDERS
             .iter()
             .zip(&self.differences)
             .filter_map(|(&k, d)| order_estimate(d, k))
-            .min_by(|a, b| a.variance.total_cmp(&b.variance))
+            .min_by(|a, b| a.variance.total_cmp(&b.variance))?;
+        // A quantised signal whose steps outweigh its noise: the error is uniform over a step
+        // (variance step^2 / 12) while the signal moves by steps each sample, zero at rest and
+        // a slow sawtooth in between, which the differences count low. What the smoothing
+        // kernels pass on lies between the two; the midpoint is taken, its half-range added to
+        // the relative standard deviation.
+        match lattice_step(&self.steps) {
+            Some(step) if step * step / 12.0 > white.variance => {
+                let uniform = step * step / 12.0;
+                let spread = (uniform - white.variance) / (uniform + white.variance);
+                Some(DifferenceEstimate {
+                    variance: 0.5 * (uniform + white.variance),
+                    relative_std: white.relative_std.hypot(spread),
+                    quantum: Some(step),
+                    ..white
+                })
+            }
+            _ => Some(white),
+        }
     }
 
     /// The estimate of a whole series.
@@ -197,6 +226,35 @@ impl DifferenceNoise {
         y.iter().for_each(|&v| d.push(v));
         d.estimate()
     }
+}
+
+/// The step of a quantised signal: the least nonzero first difference, when at least 99 % of
+/// them are whole multiples of it (within 5 % of a step). None for a signal that is not
+/// quantised (a log written with a fixed number of decimals is, at a step far below its
+/// noise).
+fn lattice_step(steps: &[f32]) -> Option<f64> {
+    let largest = steps.iter().fold(0.0_f32, |m, v| m.max(v.abs()));
+    if largest == 0.0 || !largest.is_finite() {
+        return None;
+    }
+    // Below a millionth of the largest, a difference is the single precision's rounding.
+    let floor = 1e-6 * largest;
+    let step = steps
+        .iter()
+        .map(|v| v.abs())
+        .filter(|&v| v > floor)
+        .fold(f32::INFINITY, f32::min);
+    if !step.is_finite() {
+        return None;
+    }
+    let on_lattice = steps
+        .iter()
+        .filter(|&&v| {
+            let r = f64::from(v) / f64::from(step);
+            (r - r.round()).abs() < 0.05
+        })
+        .count();
+    (on_lattice as f64 >= 0.99 * steps.len() as f64).then_some(f64::from(step))
 }
 
 /// The k-th difference of the newest k + 1 samples (`recent[0]` newest).
@@ -254,6 +312,7 @@ fn order_estimate(d: &[f32], k: usize) -> Option<DifferenceEstimate> {
         relative_std: (2.0 * rho2 / kept as f64).sqrt(),
         order: k,
         differences: kept,
+        quantum: None,
     })
 }
 
@@ -414,10 +473,17 @@ impl GivenNoise {
             "mm^2",
             "--position-variance/--noise",
         );
+        // How well the position's variance is known, for identification to carry into its
+        // estimates: the log's estimate's spread (a given figure is taken as exact).
+        let position_variance_relative_std = match (position_origin, log) {
+            (NoiseOrigin::Log, Some(l)) => l.position.relative_std,
+            _ => 0.0,
+        };
         ResolvedNoise {
             noise: SensorNoise {
                 force_variance_n2: force.max(MIN_NOISE_VARIANCE),
                 position_variance_mm2: position.max(MIN_NOISE_VARIANCE),
+                position_variance_relative_std,
             },
             force_origin,
             position_origin,
@@ -512,6 +578,7 @@ mod tests {
             })
             .collect();
         let e = DifferenceNoise::of(&y).unwrap();
+        assert_eq!(e.quantum.map(|q| (q / step - 1.0).abs() < 1e-6), Some(true));
         let uniform = step * step / 12.0;
         assert!(
             e.variance > 0.5 * uniform && e.variance < 1.5 * uniform,
@@ -540,6 +607,7 @@ mod tests {
             relative_std: 0.01,
             order: 3,
             differences: 30_000,
+            quantum: None,
         };
         let log = LogNoise {
             force: DifferenceEstimate {

@@ -1697,10 +1697,10 @@ mod tests {
             log.position_mm.push(s.logged.position_mm);
             velocity.push(s.velocity_mm_per_s);
         }
-        let noise = SensorNoise {
-            force_variance_n2: settings.noise.force_variance_n2,
-            position_variance_mm2: settings.noise.position_variance_mm2,
-        };
+        let noise = SensorNoise::new(
+            settings.noise.force_variance_n2,
+            settings.noise.position_variance_mm2,
+        );
         let model = FrictionlessModel {
             m_n_s2_per_mm: settings.dynamics.m_n_s2_per_mm,
             d1_n_s_per_mm: settings.dynamics.d1_n_s_per_mm,

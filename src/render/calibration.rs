@@ -174,6 +174,7 @@ pub fn identification_json(
             "parameter": p.key(), "relative_std": rel, "log_length_factor_for_target": longer,
         })).collect::<Vec<_>>(),
         "filter_bias_std": id.filter_bias_std,
+        "noise_std": id.noise_std,
         "signal_share": id.signal_share,
         "fit": {
             "status": id.adequacy.status,
@@ -197,6 +198,9 @@ pub fn sensor_noise_json(noise: &ResolvedNoise) -> Value {
         "log_force_variance_relative_std": noise.log.map(|l| l.force.relative_std),
         "log_position_variance_mm2": noise.log.map(|l| l.position.variance),
         "log_position_variance_relative_std": noise.log.map(|l| l.position.relative_std),
+        "position_variance_relative_std": noise.noise.position_variance_relative_std,
+        "position_quantum_mm": noise.log.and_then(|l| l.position.quantum),
+        "force_quantum_n": noise.log.and_then(|l| l.force.quantum),
         "warnings": noise.warnings,
     })
 }
@@ -208,13 +212,25 @@ pub fn format_sensor_noise(noise: &ResolvedNoise) -> String {
         NoiseOrigin::Log => "from the log's differences",
         NoiseOrigin::Paper => "the paper's sensors; the log is too short to estimate it",
     };
-    format!(
+    let mut s = format!(
         "  sensor noise: force {:.3e} N^2 ({}), position {:.3e} mm^2 ({})\n",
         noise.noise.force_variance_n2,
         origin(noise.force_origin),
         noise.noise.position_variance_mm2,
         origin(noise.position_origin)
-    )
+    );
+    if let (NoiseOrigin::Log, Some(q)) = (
+        noise.position_origin,
+        noise.log.and_then(|l| l.position.quantum),
+    ) {
+        s.push_str(&format!(
+            "  the encoder reads in steps of {q:.4e} mm, larger than its noise: its error is not \
+             white (constant at rest), so the position variance is known only to +-{:.0} %, \
+             which the standard deviations carry\n",
+            100.0 * noise.noise.position_variance_relative_std
+        ));
+    }
+    s
 }
 
 /// The text summary of `camspring identify`.

@@ -213,3 +213,31 @@ def test_a_fine_encoder_is_weighted_with_the_noise_its_log_shows(tmp_path, profi
     stated = camspring("identify", log, "--json", "--position-variance", "0.01")
     assert "times what the log's samples scatter by" in stated.stderr, stated.stderr
     assert json.loads(stated.stdout)["noise"]["position_origin"] == "given"
+
+
+@pytest.mark.parametrize("row,profile", [("table-I", "trapezoid"), ("heaviest", "force")])
+def test_a_quantised_encoder_is_read_with_its_steps_and_honest_deviations(tmp_path, row, profile):
+    """An encoder that reads in 5 um steps with no other noise. Its error is not white: at
+    rest it is a constant, and moving less than a step a sample it is a slow sawtooth. The
+    log's differences put its variance at 1.0e-6 mm^2, while steps of 5 um are 2.1e-6 mm^2
+    while moving. Weighted with the first, the heaviest force-controlled run was reported as
+    fitting with m 10 standard deviations low; with the second, Table I's trapezoids had m 6
+    high. Now the step is found, the variance is taken between the two, and its uncertainty
+    is carried into the estimates: every one is within three standard deviations."""
+    t, f, x, truth = run(MATRIX_ROWS[row], Rig(seed=0, position_variance=0.0, encoder_step_mm=0.005),
+                         profile, 300.0)
+    log = tmp_path / f"quantised-{row}-{profile}.tsv"
+    write_rig_log(log, t, f, x, style="tab")
+    proc = camspring("identify", log, "--json")
+    assert proc.returncode == 0, proc.stderr
+    j = json.loads(proc.stdout)
+    noise = j["noise"]
+    assert abs(noise["position_quantum_mm"] / 0.005 - 1.0) < 1e-3, noise
+    assert noise["position_variance_relative_std"] > 0.1, noise
+    assert j["fit"]["status"] == "fits", j["fit"]
+    for key, name in KEYS:
+        value, std = j["parameters"][key], j["parameters"][key + "_std"]
+        if value is not None:
+            assert abs(value - truth[name]) < 3.0 * std, (name, value, std, truth[name])
+    text = camspring("identify", log)
+    assert "the encoder reads in steps of 5.0000e-3 mm" in text.stdout, text.stdout
