@@ -265,6 +265,10 @@ pub struct Identification {
     /// included in the standard deviations (zero when the noise is known well enough,
     /// [`super::window::NOISE_UNCERTAINTY_MIN`]).
     pub noise_std: [f64; 7],
+    /// How much the reduced chi-square rises with the position variance one standard
+    /// deviation higher (0 when the noise is known well enough): the window choice allows
+    /// for it when it compares windows' reduced chi-squares.
+    pub reduced_chi2_noise_change: f64,
 }
 
 /// The precision the calibration of a spring law aims at: k2 within 0.5 % and mu within
@@ -1247,6 +1251,7 @@ pub(super) fn fit(
         adequacy,
         filter_bias_std: [0.0; 7],
         noise_std: [0.0; 7],
+        reduced_chi2_noise_change: 0.0,
         signal_share,
     })
 }

@@ -9,6 +9,7 @@ heavy one, the paper's Table I and a light one. Every log has a comment header, 
 and a dropped sample.
 """
 import json
+import re
 
 import numpy as np
 import pytest
@@ -215,16 +216,23 @@ def test_a_fine_encoder_is_weighted_with_the_noise_its_log_shows(tmp_path, profi
     assert json.loads(stated.stdout)["noise"]["position_origin"] == "given"
 
 
-@pytest.mark.parametrize("row,profile", [("table-I", "trapezoid"), ("heaviest", "force")])
-def test_a_quantised_encoder_is_read_with_its_steps_and_honest_deviations(tmp_path, row, profile):
+@pytest.mark.parametrize("row,profile,step,seed", [("table-I", "trapezoid", 0.005, 0),
+                                                   ("heaviest", "force", 0.005, 0),
+                                                   ("table-I", "trapezoid", 0.02, 1)])
+def test_a_quantised_encoder_is_read_with_its_steps_and_honest_deviations(tmp_path, row, profile, step, seed):
     """An encoder that reads in 5 um steps with no other noise. Its error is not white: at
     rest it is a constant, and moving less than a step a sample it is a slow sawtooth. The
     log's differences put its variance at 1.0e-6 mm^2, while steps of 5 um are 2.1e-6 mm^2
     while moving. Weighted with the first, the heaviest force-controlled run was reported as
     fitting with m 10 standard deviations low; with the second, Table I's trapezoids had m 6
     high. Now the step is found, the variance is taken between the two, and its uncertainty
-    is carried into the estimates: every one is within three standard deviations."""
-    t, f, x, truth = run(MATRIX_ROWS[row], Rig(seed=0, position_variance=0.0, encoder_step_mm=0.005),
+    is carried into the estimates: every one is within three standard deviations.
+
+    In 20 um steps (Table I trapezoid, seed 1) the reduced chi-square's rise from 0.15 to
+    0.21 s was the noise's uncertainty, not the corners: identification stayed at 0.15 s with
+    k2 known to 56 %, and the filter started from it diverged three times (exit 2). Now the
+    rise is allowed for, and the filter runs (it may flag itself: the error is not white)."""
+    t, f, x, truth = run(MATRIX_ROWS[row], Rig(seed=seed, position_variance=0.0, encoder_step_mm=step),
                          profile, 300.0)
     log = tmp_path / f"quantised-{row}-{profile}.tsv"
     write_rig_log(log, t, f, x, style="tab")
@@ -232,12 +240,17 @@ def test_a_quantised_encoder_is_read_with_its_steps_and_honest_deviations(tmp_pa
     assert proc.returncode == 0, proc.stderr
     j = json.loads(proc.stdout)
     noise = j["noise"]
-    assert abs(noise["position_quantum_mm"] / 0.005 - 1.0) < 1e-3, noise
+    assert abs(noise["position_quantum_mm"] / step - 1.0) < 1e-3, noise
     assert noise["position_variance_relative_std"] > 0.1, noise
     assert j["fit"]["status"] == "fits", j["fit"]
     for key, name in KEYS:
         value, std = j["parameters"][key], j["parameters"][key + "_std"]
         if value is not None:
             assert abs(value - truth[name]) < 3.0 * std, (name, value, std, truth[name])
+    k2_rel_std = j["parameters"]["k2_per_mm_std"] / j["parameters"]["k2_per_mm"]
+    assert k2_rel_std < 0.05, k2_rel_std
     text = camspring("identify", log)
-    assert "the encoder reads in steps of 5.0000e-3 mm" in text.stdout, text.stdout
+    said = re.search(r"the encoder reads in steps of (\S+) mm", text.stdout)
+    assert said and abs(float(said.group(1)) / step - 1.0) < 1e-3, text.stdout
+    est = camspring("estimate", log, "--json", "-o", tmp_path / "est.csv")
+    assert est.returncode in (0, 1), est.stderr
