@@ -185,6 +185,23 @@ def test_an_inertia_disagreement_names_identifications_lean_when_the_filter_is_t
     assert (ident["m_n_s2_per_mm"] - truth["m"]) / ident["m_n_s2_per_mm_std"] > 2.5, ident
 
 
+def identified_rig_log(path, row, rig, profile):
+    """A 300 s log of the rig's `row` transmission, written with tabs, and `identify --json`
+    of it (which must succeed)."""
+    t, f, x, truth = run(MATRIX_ROWS[row], rig, profile, 300.0)
+    write_rig_log(path, t, f, x, style="tab")
+    proc = camspring("identify", path, "--json")
+    assert proc.returncode == 0, proc.stderr
+    return path, json.loads(proc.stdout), truth
+
+
+def assert_every_estimate_within_three_sigma(j, truth):
+    for key, name in KEYS:
+        value, std = j["parameters"][key], j["parameters"][key + "_std"]
+        if value is not None:
+            assert abs(value - truth[name]) < 3.0 * std, (name, value, std, truth[name])
+
+
 @pytest.mark.parametrize("profile", ["trapezoid", "multisine"])
 def test_a_fine_encoder_is_weighted_with_the_noise_its_log_shows(tmp_path, profile):
     """A rig whose encoder is a hundred times finer than the paper's (1 um rms, not 0.1 mm).
@@ -193,22 +210,14 @@ def test_a_fine_encoder_is_weighted_with_the_noise_its_log_shows(tmp_path, profi
     noise now comes from the log's own differences: within a few percent of the truth, and
     every estimate within three of its standard deviations. Stating the paper's noise
     explicitly is kept, with a warning that names the log's own figure."""
-    tr = MATRIX_ROWS["table-I"]
-    t, f, x, truth = run(tr, Rig(seed=0, position_variance=1e-6), profile, 300.0)
-    log = tmp_path / f"fine-{profile}.tsv"
-    write_rig_log(log, t, f, x, style="tab")
-    proc = camspring("identify", log, "--json")
-    assert proc.returncode == 0, proc.stderr
-    j = json.loads(proc.stdout)
+    log, j, truth = identified_rig_log(tmp_path / f"fine-{profile}.tsv", "table-I",
+                                       Rig(seed=0, position_variance=1e-6), profile)
     noise = j["noise"]
     assert noise["position_origin"] == "log" and noise["force_origin"] == "log", noise
     assert abs(noise["position_variance_mm2"] / 1e-6 - 1.0) < 0.05, noise
     assert abs(noise["force_variance_n2"] / Rig().force_variance - 1.0) < 0.05, noise
     assert j["fit"]["status"] == "fits", j["fit"]
-    for key, name in KEYS:
-        value, std = j["parameters"][key], j["parameters"][key + "_std"]
-        if value is not None:
-            assert abs(value - truth[name]) < 3.0 * std, (name, value, std, truth[name])
+    assert_every_estimate_within_three_sigma(j, truth)
     k2_error = abs(j["parameters"]["k2_per_mm"] / truth["k2"] - 1.0)
     assert k2_error < 0.005, k2_error
     stated = camspring("identify", log, "--json", "--position-variance", "0.01")
@@ -232,21 +241,14 @@ def test_a_quantised_encoder_is_read_with_its_steps_and_honest_deviations(tmp_pa
     0.21 s was the noise's uncertainty, not the corners: identification stayed at 0.15 s with
     k2 known to 56 %, and the filter started from it diverged three times (exit 2). Now the
     rise is allowed for, and the filter runs (it may flag itself: the error is not white)."""
-    t, f, x, truth = run(MATRIX_ROWS[row], Rig(seed=seed, position_variance=0.0, encoder_step_mm=step),
-                         profile, 300.0)
-    log = tmp_path / f"quantised-{row}-{profile}.tsv"
-    write_rig_log(log, t, f, x, style="tab")
-    proc = camspring("identify", log, "--json")
-    assert proc.returncode == 0, proc.stderr
-    j = json.loads(proc.stdout)
+    log, j, truth = identified_rig_log(tmp_path / f"quantised-{row}-{profile}.tsv", row,
+                                       Rig(seed=seed, position_variance=0.0, encoder_step_mm=step),
+                                       profile)
     noise = j["noise"]
     assert abs(noise["position_quantum_mm"] / step - 1.0) < 1e-3, noise
     assert noise["position_variance_relative_std"] > 0.1, noise
     assert j["fit"]["status"] == "fits", j["fit"]
-    for key, name in KEYS:
-        value, std = j["parameters"][key], j["parameters"][key + "_std"]
-        if value is not None:
-            assert abs(value - truth[name]) < 3.0 * std, (name, value, std, truth[name])
+    assert_every_estimate_within_three_sigma(j, truth)
     k2_rel_std = j["parameters"]["k2_per_mm_std"] / j["parameters"]["k2_per_mm"]
     assert k2_rel_std < 0.05, k2_rel_std
     text = camspring("identify", log)
