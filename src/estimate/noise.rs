@@ -432,21 +432,21 @@ impl GivenNoise {
             (Some(g), e) => {
                 if let Some(e) = e {
                     let excess = GIVEN_NOISE_EXCESS + 4.0 * e.relative_std;
-                    if g > e.variance * (1.0 + excess) {
-                        warnings.push(format!(
-                            "the given {what} noise variance {g:.4e} {unit} is {:.2} times what \
-                             the log's samples scatter by ({:.4e} {unit}, from their differences); \
-                             too high a noise makes identification over-correct (m and the \
-                             damping come out too high): drop {flag} to use the log's own",
-                            g / e.variance,
-                            e.variance
-                        ));
+                    let consequence = if g > e.variance * (1.0 + excess) {
+                        Some(
+                            "too high a noise makes identification over-correct (m and the \
+                             damping come out too high)",
+                        )
                     } else if g < e.variance * GIVEN_NOISE_SHORTFALL {
+                        Some("the reported standard deviations may be too small")
+                    } else {
+                        None
+                    };
+                    if let Some(consequence) = consequence {
                         warnings.push(format!(
                             "the given {what} noise variance {g:.4e} {unit} is {:.2} times what \
                              the log's samples scatter by ({:.4e} {unit}, from their \
-                             differences); the reported standard deviations may be too small: \
-                             drop {flag} to use the log's own",
+                             differences); {consequence}: drop {flag} to use the log's own",
                             g / e.variance,
                             e.variance
                         ));

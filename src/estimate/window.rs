@@ -269,10 +269,16 @@ fn add_filter_bias(id: &mut Identification, shorter: &Estimates) {
             continue;
         }
         id.filter_bias_std[p.index()] = systematic.sqrt();
-        id.parameters.set_std(p, (sb * sb + systematic).sqrt());
-        if let Some(k) = names.iter().position(|n| n == p.key()) {
-            id.covariance[k][k] += systematic;
-        }
+        add_systematic(id, &names, p, sb, systematic);
+    }
+}
+
+/// Adds a systematic variance to parameter `p`'s (standard deviation `std` before) and to
+/// the covariance's diagonal.
+fn add_systematic(id: &mut Identification, names: &[String], p: Param, std: f64, variance: f64) {
+    id.parameters.set_std(p, (std * std + variance).sqrt());
+    if let Some(k) = names.iter().position(|n| n == p.key()) {
+        id.covariance[k][k] += variance;
     }
 }
 
@@ -327,10 +333,7 @@ fn add_noise_uncertainty(id: &mut Identification, raised: &Estimates) {
             continue;
         }
         id.noise_std[p.index()] = change;
-        id.parameters.set_std(p, (s * s + change * change).sqrt());
-        if let Some(k) = names.iter().position(|n| n == p.key()) {
-            id.covariance[k][k] += change * change;
-        }
+        add_systematic(id, &names, p, s, change * change);
     }
 }
 
