@@ -118,6 +118,25 @@ pub fn jacobian_rows(z: &State, u: f64) -> SMatrix<f64, 5, 8> {
     a
 }
 
+/// The largest product of the prediction's fastest rate and one (sub)step: well inside RK4's
+/// stability limit (about 2.8 on the real axis) and the second-order transition matrix's (2).
+pub const STABLE_STEP: f64 = 1.0;
+
+/// The most substeps one sample's prediction is split into (bounded work per sample).
+pub const MAX_SUBSTEPS: usize = 64;
+
+/// How many substeps keep the prediction over `dt` stable at state `z` ([`STABLE_STEP`]).
+fn substeps(z: &State, dt: f64) -> usize {
+    let m = z[idx::M].abs().max(1e-300);
+    let rate = (z[idx::D].abs() / m).max((z[idx::SIGMA].abs() / m).sqrt());
+    let n = (rate * dt / STABLE_STEP).ceil();
+    if n.is_finite() {
+        n.clamp(1.0, MAX_SUBSTEPS as f64) as usize
+    } else {
+        MAX_SUBSTEPS
+    }
+}
+
 /// Tuning of the filter.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct EkfSettings {
@@ -202,7 +221,28 @@ impl Ekf {
     }
 
     /// Prediction over `dt` with the input going from `u0` to `u1` (linearly).
+    ///
+    /// RK4 and the second-order transition matrix are stable while the fastest rate of the
+    /// prediction (D / M, or sqrt(sigma / M)) times the step stays below about 2; the inertia's
+    /// floor keeps the start there, but the filter's D or sigma can grow on the way (a
+    /// transient the model does not follow). The step is then split into up to
+    /// [`MAX_SUBSTEPS`] equal substeps of at most [`STABLE_STEP`] each, so the prediction stays
+    /// finite instead of blowing up within a few samples.
     pub fn predict(&mut self, u0: f64, u1: f64, dt: f64) {
+        let n = match self.settings.discretization {
+            Discretization::Euler => 1,
+            Discretization::Rk4 => substeps(&self.z, dt),
+        };
+        let h = dt / n as f64;
+        for j in 0..n {
+            let ua = u0 + (u1 - u0) * (j as f64 / n as f64);
+            let ub = u0 + (u1 - u0) * ((j + 1) as f64 / n as f64);
+            self.predict_step(ua, ub, h);
+        }
+    }
+
+    /// One prediction step of `dt` (see [`Self::predict`]).
+    fn predict_step(&mut self, u0: f64, u1: f64, dt: f64) {
         let z = self.z;
         let a5 = jacobian_rows(&z, u0) * dt;
         self.z = match self.settings.discretization {
@@ -1088,6 +1128,55 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// A prediction whose damping rate D / M times the sample interval is 50: one RK4 step
+    /// multiplies the acceleration's transient by about 2.4e5 (the filter lost a servo's
+    /// ramp-hold log this way when its D grew), the substeps follow the closed form
+    /// xdd = U / D (1 - exp(-D t / M)) of a constant force rate U with no stiffness.
+    #[test]
+    fn a_stiff_prediction_is_split_into_substeps_and_follows_the_closed_form() {
+        let (u, d, m, dt) = (3.0, 5.0, 0.001, 0.01);
+        let mut settings = EkfSettings {
+            sigma_floor: 0.0,
+            ..default_settings(
+                &EkfInit {
+                    k2_per_mm: (0.2, 0.01),
+                    mu_n: 1.0,
+                    f0_n: 0.0,
+                    d0_n: 0.0,
+                    m_n_s2_per_mm: (m, 0.0),
+                    d1_n_s_per_mm: (d, 0.1),
+                    d2_n_s3_per_mm3: (0.0, 0.0),
+                },
+                &crate::estimate::identify::SensorNoise::new(1e-3, 1e-4),
+                dt,
+                Discretization::Rk4,
+                ForceRate::ZeroPhase,
+            )
+        };
+        settings.m_floor = 0.0;
+        assert_eq!(
+            substeps(&State::from([0.0, 0.0, 0.0, 0.0, d, m, 0.0, 0.0]), dt),
+            50
+        );
+        let mut ekf = Ekf::new(State::from([0.0, 0.0, 0.0, 0.0, d, m, 0.0, 0.0]), settings);
+        ekf.predict(u, u, dt);
+        let rate = d / m;
+        let xdd = u / d * (1.0 - (-rate * dt).exp());
+        let xd = u / d * (dt - (1.0 - (-rate * dt).exp()) / rate);
+        assert!(
+            (ekf.z[idx::XDD] - xdd).abs() < 1e-6 * xdd,
+            "{} against {xdd}",
+            ekf.z[idx::XDD]
+        );
+        assert!(
+            (ekf.z[idx::XD] - xd).abs() < 1e-4 * xd,
+            "{} against {xd}",
+            ekf.z[idx::XD]
+        );
+        assert!(ekf.p.iter().all(|v| v.is_finite()));
+        assert!((0..8).all(|i| ekf.p[(i, i)] >= 0.0));
     }
 
     #[test]

@@ -851,6 +851,7 @@ where
     let mut progress = progress;
     // One run of the filter over the whole log, rows to the sink.
     let mut run_once = |settings: EkfSettings,
+                        start: ekf::Start,
                         sink: &mut dyn RowSink|
      -> Result<(EkfRun, EkfSettings, Option<f64>), EstimateError> {
         let mut filter = ekf::Filter::new(
@@ -898,7 +899,7 @@ where
         Ok((run, settings, path.mean_square_z()))
     };
     let mut recovery = None;
-    let (run, settings, stiffness_path) = match run_once(settings, sink) {
+    let (run, settings, stiffness_path) = match run_once(settings, start, sink) {
         Ok(done) => done,
         Err(EstimateError::Filter(EkfError::Diverged { sample, t_s, what })) => {
             // A poor start. First widen what the filter may learn (ten times the initial
@@ -923,23 +924,50 @@ where
             for i in [ekf::idx::M, ekf::idx::D2] {
                 narrow.p0_std[i] *= 0.1;
             }
+            // Last, a filter that follows the log loosely (the encoder's variance taken ten
+            // times larger): a motion whose steps the filter's model cannot follow (a servo's
+            // velocity steps, sharper than the force rate's window) then no longer throws it
+            // off; its innovations fall far below their predicted variance, and the
+            // consistency check says so.
+            // Its cubic damping is held at zero: d2 moves D with the speed, and a filter that
+            // loses the speed then drives D to zero and the acceleration away.
+            let mut loose = settings;
+            loose.r_position_mm2 *= 10.0;
+            loose.p0_std[ekf::idx::D2] = 0.0;
+            loose.q[ekf::idx::D2] = 0.0;
+            let loose_start = ekf::Start::Init {
+                init: EkfInit {
+                    d2_n_s3_per_mm3: (0.0, 0.0),
+                    ..init
+                },
+                stroke_mm: stroke,
+            };
             let attempts = [
                 (
                     wide,
+                    start,
                     "ten times the initial standard deviations of sigma, D, M, k2 and d2 and ten \
                      times the process noise of the acceleration",
                 ),
                 (
                     narrow,
+                    start,
                     "a tenth of the initial standard deviations of M and d2 (held close to \
                      identification's values)",
+                ),
+                (
+                    loose,
+                    loose_start,
+                    "the encoder's variance taken ten times larger and d2 held at zero (the \
+                     filter follows the log loosely, and its standard deviations are not to be \
+                     trusted)",
                 ),
             ];
             let mut failures = Vec::new();
             let mut done = None;
-            for (attempt, how) in attempts {
+            for (attempt, attempt_start, how) in attempts {
                 sink.restart();
-                match run_once(attempt, sink) {
+                match run_once(attempt, attempt_start, sink) {
                     Ok(d) => {
                         recovery = Some(format!(
                             "the filter diverged at sample {sample} (t = {t_s:.3} s: {what}); {}it \
