@@ -730,3 +730,96 @@ fn an_uncertain_position_noise_widens_each_estimate_by_what_it_moves() {
         }
     }
 }
+
+/// A position-controlled rig's ramp-hold run: ramps at a constant speed (1 to 4 mm/s, one per
+/// move) between random levels, 2 s holds, on the paper's Table I transmission. The servo
+/// follows each step of its velocity command with a first-order lag of `lag_s`, so the rod's
+/// acceleration is a spike a few samples wide at every start and stop (at 0.05 s and 2 mm/s,
+/// 40 mm/s^2 and 16 N of inertia force). Friction holds the rod at rest with the sign of the
+/// last motion. Returns the log (100 Hz, the paper's sensor noise) and the truth in model order.
+fn servo_ramp_log(seed: u64, lag_s: f64) -> (CalibrationLog, [f64; 7]) {
+    let (m, d0, d1, d2, mu, f0, k2) = (0.39, 3.82, 1.84, -0.0108, 0.9251, 13.75, 0.2586);
+    let (hold, rate, seconds, fine) = (2.0, 100.0, 300.0, 20);
+    let mut rng = StdRng::seed_from_u64(seed);
+    let level = rand_distr::Uniform::new(1.8, 13.2).unwrap();
+    let speed = rand_distr::Uniform::new(1.0, 4.0).unwrap();
+    // The velocity command: (start, end, speed) of each ramp.
+    let mut ramps = Vec::new();
+    let (mut t, mut from) = (hold, 7.5);
+    while t < seconds {
+        let (to, v): (f64, f64) = (level.sample(&mut rng), speed.sample(&mut rng));
+        let duration = (to - from).abs() / v;
+        ramps.push((t, t + duration, v * (to - from).signum()));
+        (t, from) = (t + duration + hold, to);
+    }
+    let command = |t: f64| {
+        let k = ramps.partition_point(|r| r.0 <= t);
+        match k.checked_sub(1).map(|k| ramps[k]) {
+            Some((_, end, v)) if t < end => v,
+            _ => 0.0,
+        }
+    };
+    let force_noise = Normal::new(0.0, 0.017_f64.sqrt()).unwrap();
+    let position_noise = Normal::new(0.0, 0.01_f64.sqrt()).unwrap();
+    let (mut x, mut v, mut sign): (f64, f64, f64) = (7.5, 0.0, 1.0);
+    let h = 1.0 / (rate * fine as f64);
+    let mut log = CalibrationLog::default();
+    for i in 0..(seconds * rate) as usize {
+        let t = i as f64 / rate;
+        let c = command(t);
+        let a = (c - v) / lag_s;
+        if v.abs() > 1e-9 {
+            sign = v.signum();
+        }
+        let force = m * a + d0 * sign + d1 * v + d2 * v * v * v + mu * (k2 * x).exp() + f0;
+        log.t_s.push(t);
+        log.force_n.push(force + force_noise.sample(&mut rng));
+        log.position_mm.push(x + position_noise.sample(&mut rng));
+        // The lag's exact solution over each fine step, the command held.
+        for j in 0..fine {
+            let c = command(t + j as f64 * h);
+            let decay = (-h / lag_s).exp();
+            x += c * h + (v - c) * lag_s * (1.0 - decay);
+            v = c + (v - c) * decay;
+        }
+    }
+    (log, [m, d0, d1, d2, mu, f0, k2])
+}
+
+/// A servo's velocity steps are shorter than any window that averages the encoder's noise:
+/// the filtered acceleration spreads each start's and stop's inertia force over the window.
+/// Identification leaves those samples out ([`Identification::transient_samples`]) and says
+/// what the rest cannot resolve, instead of reading the misplaced force as spring and damper.
+/// (Before, on the independent rig's ramp-holds of this kind, identification called the fit
+/// "does not fit" at a reduced chi-square of 1.6 to 2.0 with k2 up to 11 % off, or, on the
+/// default transmission, took it at 1.4 with m 5.7 sigma off.)
+#[test]
+fn a_servos_velocity_steps_are_left_out_not_read_as_spring() {
+    for seed in 0..3 {
+        let (log, truth) = servo_ramp_log(seed, 0.05);
+        let id = identify(&log, &SensorNoise::default()).unwrap();
+        assert_eq!(
+            id.adequacy.status,
+            FitStatus::Fits,
+            "seed {seed}: {:?}",
+            id.adequacy
+        );
+        assert!(id.reduced_chi2 < 1.2, "seed {seed}: {}", id.reduced_chi2);
+        assert!(
+            id.transient_samples > 0,
+            "seed {seed}: no transient left out"
+        );
+        for (p, e) in id.parameters.iter() {
+            if let (Some(v), Some(s)) = (e.value, e.std) {
+                let z = (v - truth[p.index()]) / s;
+                assert!(
+                    z.abs() < 3.0,
+                    "seed {seed}: {} is {z:.2} sigma off",
+                    p.key()
+                );
+            }
+        }
+        let k2 = id.get(Param::K2).value.unwrap();
+        assert!((k2 / truth[6] - 1.0).abs() < 0.02, "seed {seed}: k2 {k2}");
+    }
+}

@@ -18,6 +18,14 @@
 //! left out of steps 3 and 4: their friction sign is unknown (at rest, static friction is
 //! anywhere in +-d0), and guessing it biases d0 and d1.
 //!
+//! Unresolved transients: a motion whose speed steps (a servo following a velocity command
+//! with a lag of a few samples) puts the inertia force where the step is, while the filtered
+//! acceleration spreads it over the window. Samples within half a window of a force residual
+//! beyond [`TRANSIENT_SIGMAS`] standard deviations (at rest: beyond d0 by as much, since the
+//! friction there is anywhere in +-d0) are left out and the fit repeated, when those residuals
+//! raise the reduced chi-square by at least the window choice's tolerance
+//! ([`super::window::CHI2_RISE_MIN`]) and half the moving samples remain.
+//!
 //! Reported standard deviations: the smoothed position noise makes neighbouring residuals
 //! correlated over one filter window, so (A^T R^-1 A)^-1 is too optimistic (it assumes
 //! independent rows). The reported covariance is the sandwich H^-1 S H^-1 with S summed from
@@ -42,8 +50,8 @@ use super::log::{CalibrationLog, MIN_LOG_SAMPLES};
 use super::sg::{self, Differentiator};
 pub use super::window::{
     candidate_windows, choose_window, fit_with_noise_uncertainty, WindowCandidate, WindowChoice,
-    WindowMethod, BALANCING_SIGMAS, LONGEST_WINDOW_S, SHORTEST_WINDOW_S, SHORTEST_WINDOW_SAMPLES,
-    WINDOW_RATIO,
+    WindowMethod, BALANCING_SIGMAS, CHI2_RISE_MIN, LONGEST_WINDOW_S, SHORTEST_WINDOW_S,
+    SHORTEST_WINDOW_SAMPLES, WINDOW_RATIO,
 };
 
 /// Parameter names in model order (the JSON keys, with units).
@@ -124,6 +132,17 @@ const NOISY_ORDER: [usize; 3] = [M, D2, D1];
 /// Smallest share of the information on m that must be signal rather than acceleration noise
 /// for m to count as identifiable.
 pub const MIN_INERTIA_SIGNAL_SHARE: f64 = 0.0;
+
+/// A force residual this many standard deviations from the model marks a transient the window
+/// does not resolve (over 30 000 rows of white noise, about 0.02 would pass it by chance).
+pub const TRANSIENT_SIGMAS: f64 = 5.0;
+
+/// How many times identification leaves out unresolved transients and fits again.
+pub const TRANSIENT_ROUNDS: usize = 3;
+
+/// Transients are left out only while at least this share of the moving samples remains: a
+/// log that is mostly transients at a window is judged by its fit's adequacy instead.
+pub const TRANSIENT_KEEP_SHARE: f64 = 0.5;
 
 /// Smallest eigenvalue, relative to the largest, of the unit-diagonal normal matrix for which
 /// every parameter counts as identifiable (a condition number of 1e8).
@@ -246,6 +265,14 @@ pub struct Identification {
     pub block_samples: usize,
     /// Samples used in the dynamic fit.
     pub dynamic_samples: usize,
+    /// Moving samples left out of the dynamic fit as unresolved transients: within half a
+    /// window of a force residual beyond [`TRANSIENT_SIGMAS`] standard deviations (a motion
+    /// that changes faster than the window resolves, or a glitch in the log).
+    pub transient_samples: usize,
+    /// The reduced chi-square before unresolved transients were left out (equal to
+    /// [`Self::reduced_chi2`] when none were): how well this window's filter follows the
+    /// whole motion, which the window choice compares.
+    pub reduced_chi2_with_transients: f64,
     /// The log's top speed, from its smoothed motion velocity (mm/s).
     pub speed_max_mm_per_s: f64,
     /// Quasi-static samples used for the k2 stage.
@@ -1028,6 +1055,26 @@ pub(super) fn fit(
     noise: &SensorNoise,
     diff: &Differentiator,
 ) -> Result<Identification, IdentifyError> {
+    fit_model(log, noise, diff, Inertia::Fitted)
+}
+
+/// Whether a fit estimates the inertia m.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Inertia {
+    /// m is estimated (unless the log cannot identify it).
+    Fitted,
+    /// m is left out, as not identifiable: the window choice's refit where m's information
+    /// at this window is mostly the filtered acceleration's noise.
+    LeftOut,
+}
+
+/// The identification at one Savitzky-Golay window, with or without the inertia.
+pub(super) fn fit_model(
+    log: &CalibrationLog,
+    noise: &SensorNoise,
+    diff: &Differentiator,
+    inertia: Inertia,
+) -> Result<Identification, IdentifyError> {
     let dt = log.dt_s();
     let h = diff.half;
     if log.len() < 4 * diff.window() {
@@ -1114,9 +1161,11 @@ pub(super) fn fit(
     let (p1, _) = gauss_newton(best.1, &qs_rows, &mut spring_only, 100)?;
 
     // Stages 2 and 3 on the samples moving faster than `band`.
-    let dynamic_fit = |band: f64| -> Result<_, IdentifyError> {
+    let dynamic_fit = |band: f64, excluded: &[bool]| -> Result<_, IdentifyError> {
         // Stage 2: the paper's WLS with k2 fixed, on the samples whose friction sign is known.
-        let moving: Vec<usize> = (0..n).filter(|&i| motion[i].abs() > band).collect();
+        let moving: Vec<usize> = (0..n)
+            .filter(|&i| motion[i].abs() > band && !excluded[i])
+            .collect();
         let needed = 20 * 7;
         if moving.len() < needed {
             return Err(IdentifyError::TooLittleMotion {
@@ -1126,9 +1175,20 @@ pub(super) fn fit(
             });
         }
         let rows = all.subset(&moving, true);
-        let mut active = [true, true, true, true, true, true, false];
+        let mut active = [
+            inertia == Inertia::Fitted,
+            true,
+            true,
+            true,
+            true,
+            true,
+            false,
+        ];
         let mut p = p1;
         let mut not_identifiable = Vec::new();
+        if inertia == Inertia::LeftOut {
+            not_identifiable.push(PARAMS[M].to_string());
+        }
         for _ in 0..2 {
             let weights = weights_at(&p, &rows);
             not_identifiable.extend(prune_all(&mut p, &rows, &mut active, &weights));
@@ -1154,8 +1214,10 @@ pub(super) fn fit(
         not_identifiable.extend(dropped);
         Ok((rows, p, active, not_identifiable, paper_covariance_k2_fixed))
     };
+    let mut excluded = vec![false; n];
+    let mut band = band;
     let (mut rows, mut p, mut active, mut not_identifiable, mut paper_covariance_k2_fixed) =
-        dynamic_fit(band)?;
+        dynamic_fit(band, &excluded)?;
     // A wrong friction sign costs a residual of 2 d0. Samples within a few velocity-noise
     // standard deviations of zero can have it; with strong Coulomb friction the band is widened
     // until the expected share of such rows, times (2 d0)^2, is below 1 % of the row variance.
@@ -1170,9 +1232,69 @@ pub(super) fn fit(
         }
         let wider = (z * sigma_motion).max(1e-3 * vmax);
         if wider > band {
-            (rows, p, active, not_identifiable, paper_covariance_k2_fixed) = dynamic_fit(wider)?;
+            band = wider;
+            (rows, p, active, not_identifiable, paper_covariance_k2_fixed) =
+                dynamic_fit(band, &excluded)?;
         }
     }
+    // Transients the window cannot resolve: where the motion changes within a window (a
+    // servo's velocity step, a trapezoidal move's acceleration step), the filtered
+    // acceleration spreads the inertia force over the window while the measured force has it
+    // where it is. The residual there stands out far beyond its noise; every sample whose
+    // filtered values it reaches (half a window each side) is left out and the fit repeated.
+    let moving_samples = rows.f.len();
+    let reduced_chi2_with_transients = {
+        let weights = weights_at(&p, &rows);
+        let chi2: f64 = (0..rows.f.len())
+            .map(|i| weights[i] * (rows.f[i] - model(&p, &rows, i).0).powi(2))
+            .sum();
+        chi2 / (rows.f.len() - active.iter().filter(|a| **a).count()).max(1) as f64
+    };
+    for _ in 0..TRANSIENT_ROUNDS {
+        let weights = weights_at(&p, &rows);
+        let mut next = excluded.clone();
+        let mut excess = 0.0;
+        for (i, w) in weights.iter().enumerate() {
+            let z = (rows.f[i] - model(&p, &rows, i).0) * w.sqrt();
+            if z.abs() > TRANSIENT_SIGMAS {
+                excess += z * z - 1.0;
+                let s = rows.index[i];
+                next[s.saturating_sub(h)..=(s + h).min(n - 1)].fill(true);
+            }
+        }
+        // At rest the friction is anywhere in +-d0, so a resting sample is a transient where
+        // its residual without friction exceeds d0 by as much: a move's start or stop whose
+        // inertia force the filtered acceleration spreads into the moving samples nearby.
+        let d0 = if active[D0] { p[D0].abs() } else { 0.0 };
+        for i in (0..n).filter(|&i| motion[i].abs() <= band) {
+            let (f, _) = model(&p, &all, i);
+            let frictionless = all.f[i] - (f - p[D0] * all.sgn[i]);
+            let sd = row_variance(&p, &all, i).sqrt();
+            if frictionless.abs() > d0 + TRANSIENT_SIGMAS * sd {
+                let z = (frictionless.abs() - d0) / sd;
+                excess += z * z - 1.0;
+                next[i.saturating_sub(h)..=(i + h).min(n - 1)].fill(true);
+            }
+        }
+        // A few outliers that raise the reduced chi-square by less than the window choice
+        // tolerates (a friction sign wrong on a sample or two at a reversal) are left in.
+        let left = (0..n)
+            .filter(|&i| motion[i].abs() > band && !next[i])
+            .count();
+        if excess < CHI2_RISE_MIN * rows.f.len() as f64
+            || (left as f64) < TRANSIENT_KEEP_SHARE * moving_samples as f64
+        {
+            break;
+        }
+        let Ok(refit) = dynamic_fit(band, &next) else {
+            break;
+        };
+        excluded = next;
+        (rows, p, active, not_identifiable, paper_covariance_k2_fixed) = refit;
+    }
+    let transient_samples = (0..n)
+        .filter(|&i| motion[i].abs() > band && excluded[i])
+        .count();
     let weights = weights_at(&p, &rows);
     let (jtj, _, _) = normal(&p, &rows, &active, &weights);
     let raw = jtj + correction(&rows, &active, &weights);
@@ -1240,6 +1362,8 @@ pub(super) fn fit(
         log_samples: log.len(),
         block_samples: 1,
         dynamic_samples: m,
+        transient_samples,
+        reduced_chi2_with_transients,
         speed_max_mm_per_s: vmax,
         quasi_static_samples: qs_rows.f.len(),
         sg_window: diff.window(),

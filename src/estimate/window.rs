@@ -6,7 +6,9 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use super::adequacy::FitStatus;
-use super::identify::{fit, Estimates, Identification, IdentifyError, Param, SensorNoise};
+use super::identify::{
+    fit, fit_model, Estimates, Identification, IdentifyError, Inertia, Param, SensorNoise,
+};
 use super::log::CalibrationLog;
 use super::sg::{self, Differentiator};
 
@@ -140,9 +142,56 @@ pub fn choose_window(
         .par_iter()
         .map(|&w| fit_with_noise_uncertainty(log, noise, &Differentiator::new(w)))
         .collect();
-    let fewest_missing = fits
-        .iter()
-        .filter_map(|f| f.as_ref().ok())
+    // The windows compared are chosen in three steps, each among the windows the one before
+    // left:
+    // 1. A window whose fit explains the log is preferred to one that does not, even if that
+    //    keeps more parameters (at a long window, unresolved transients can no longer be left
+    //    out, and the fit that keeps m then misplaces its force). Unless no window fits.
+    // 2. The errors-in-variables correction is a first-order one: at a window where the noise
+    //    of the filtered acceleration or velocity makes up most of a parameter's information,
+    //    it leaves a bias that the fit's standard deviations do not show. Such windows are not
+    //    compared; a parameter is rather given up at a shorter window (the threshold is
+    //    lowered for a log on which no window reaches it).
+    // 3. The windows that keep the most parameters, and of those the ones that move at least
+    //    half as many samples as the most (transients left out at a long window cost many).
+    let ok = || fits.iter().filter_map(|f| f.as_ref().ok());
+    let fits_somewhere = ok().any(|id| id.adequacy.status == FitStatus::Fits);
+    let explains = |id: &Identification| !fits_somewhere || id.adequacy.status == FitStatus::Fits;
+    let best_share = ok()
+        .filter(|id| explains(id))
+        .map(|id| id.signal_share)
+        .fold(0.0_f64, f64::max);
+    let min_share = MIN_SIGNAL_SHARE.min(0.5 * best_share);
+    // Where m's information is mostly noise, the window is fitted again without it: the other
+    // parameters are then compared at that window, and m is given up there instead.
+    let refits: Vec<(usize, Result<Identification, IdentifyError>)> = (0..fits.len())
+        .into_par_iter()
+        .filter_map(|i| {
+            let id = fits[i].as_ref().ok()?;
+            (explains(id) && id.signal_share < min_share && id.get(Param::M).value.is_some()).then(
+                || {
+                    let diff = Differentiator::new(windows[i]);
+                    (
+                        i,
+                        fit_inertia_with_noise_uncertainty(log, noise, &diff, Inertia::LeftOut),
+                    )
+                },
+            )
+        })
+        .collect();
+    let mut fits = fits;
+    for (i, refit) in refits {
+        if refit
+            .as_ref()
+            .is_ok_and(|id| id.adequacy.status == FitStatus::Fits || !fits_somewhere)
+        {
+            fits[i] = refit;
+        }
+    }
+    let ok = || fits.iter().filter_map(|f| f.as_ref().ok());
+    let resolved = |id: &Identification| explains(id) && id.signal_share >= min_share;
+    let fewest_missing = ok()
+        .filter(|id| resolved(id))
         .map(|id| id.not_identifiable.len())
         .min();
     let Some(fewest_missing) = fewest_missing else {
@@ -152,41 +201,17 @@ pub fn choose_window(
             .next()
             .unwrap_or_else(|| fit(log, noise, &Differentiator::new(sg::MIN_WINDOW)));
     };
-    // The most samples that move at a window whose fit explains the log (a distorted fit at a
-    // long window can count more).
-    let most_moving = fits
-        .iter()
-        .filter_map(|f| f.as_ref().ok())
-        .filter(|id| id.adequacy.status == FitStatus::Fits)
+    let most_moving = ok()
+        .filter(|id| resolved(id) && id.not_identifiable.len() == fewest_missing)
         .map(|id| id.dynamic_samples)
         .max()
         .unwrap_or(0);
-    // The errors-in-variables correction is a first-order one: at a window where the noise
-    // of the filtered acceleration or velocity makes up most of a parameter's information, it
-    // leaves a bias that the fit's standard deviations do not show. Such windows are not
-    // compared (the threshold is lowered for a log on which no window reaches it).
-    let best_share = fits
-        .iter()
-        .filter_map(|f| f.as_ref().ok())
-        .filter(|id| id.not_identifiable.len() == fewest_missing)
-        .map(|id| id.signal_share)
-        .fold(0.0_f64, f64::max);
-    let min_share = MIN_SIGNAL_SHARE.min(0.5 * best_share);
-    let candidate = |id: &Identification| {
-        id.not_identifiable.len() == fewest_missing
-            && 2 * id.dynamic_samples >= most_moving
-            && id.signal_share >= min_share
-    };
-    // Windows whose fit does not explain the log (too short for the kernels' conditioning, or
-    // long enough to distort the motion) are left out, unless every window is such.
-    let any_fits = fits
-        .iter()
-        .filter_map(|f| f.as_ref().ok())
-        .any(|id| candidate(id) && id.adequacy.status == FitStatus::Fits);
     let admissible: Vec<usize> = (0..fits.len())
         .filter(|&i| {
             fits[i].as_ref().is_ok_and(|id| {
-                candidate(id) && (!any_fits || id.adequacy.status == FitStatus::Fits)
+                resolved(id)
+                    && id.not_identifiable.len() == fewest_missing
+                    && 2 * id.dynamic_samples >= most_moving
             })
         })
         .collect();
@@ -304,14 +329,24 @@ pub fn fit_with_noise_uncertainty(
     noise: &SensorNoise,
     diff: &Differentiator,
 ) -> Result<Identification, IdentifyError> {
-    let mut id = fit(log, noise, diff)?;
+    fit_inertia_with_noise_uncertainty(log, noise, diff, Inertia::Fitted)
+}
+
+/// [`fit_with_noise_uncertainty`] with or without the inertia.
+fn fit_inertia_with_noise_uncertainty(
+    log: &CalibrationLog,
+    noise: &SensorNoise,
+    diff: &Differentiator,
+    inertia: Inertia,
+) -> Result<Identification, IdentifyError> {
+    let mut id = fit_model(log, noise, diff, inertia)?;
     let rel = noise.position_variance_relative_std;
     if rel > NOISE_UNCERTAINTY_MIN {
         let raised = SensorNoise {
             position_variance_mm2: noise.position_variance_mm2 * (1.0 + rel),
             ..*noise
         };
-        if let Ok(other) = fit(log, &raised, diff) {
+        if let Ok(other) = fit_model(log, &raised, diff, inertia) {
             add_noise_uncertainty(&mut id, &other.parameters);
             id.reduced_chi2_noise_change = other.reduced_chi2 - id.reduced_chi2;
         }
@@ -354,11 +389,17 @@ fn add_noise_uncertainty(id: &mut Identification, raised: &Estimates) {
 /// more than a long one's: the rise may then also be twice the difference of their changes
 /// under the raised noise. On a Table I trapezoid read in 20 um steps the rise from 0.15 to
 /// 0.21 s (1.20 to 1.33) vanished at the top of the noise's range (0.96 to 0.99).
+///
+/// The reduced chi-squares compared are those before unresolved transients were left out
+/// ([`Identification::reduced_chi2_with_transients`]): a window that needs transients left
+/// out to fit does not follow the whole motion, and a longer one leaves out more. (Compared
+/// after, a slow ramp-hold's wrong friction signs at reversals, left out at 3.4 s, let the
+/// choice go on to 4.8 s, where k2's deviation is about 1.3 times too small.)
 fn distorted(short: &Identification, long: &Identification) -> bool {
     let dof = long.dynamic_samples.max(1) as f64;
     let rise = (CHI2_RISE_SIGMAS * (2.0 / dof).sqrt()).max(CHI2_RISE_MIN);
     let noise = 2.0 * (long.reduced_chi2_noise_change - short.reduced_chi2_noise_change).abs();
-    long.reduced_chi2 > short.reduced_chi2 * (1.0 + rise) + noise
+    long.reduced_chi2_with_transients > short.reduced_chi2_with_transients * (1.0 + rise) + noise
 }
 
 /// Whether every parameter that both fits identify agrees within [`BALANCING_SIGMAS`]

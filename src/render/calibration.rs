@@ -7,7 +7,7 @@ use serde_json::{json, Map, Value};
 
 use super::plot::{self, Panel, Series};
 use crate::estimate::ekf::{idx, EkfRow, EkfRun, EkfSettings, STATE_NAMES};
-use crate::estimate::identify::{Identification, Param, WindowMethod};
+use crate::estimate::identify::{Identification, Param, WindowMethod, TRANSIENT_SIGMAS};
 use crate::estimate::noise::{NoiseModel, NoiseOrigin, ResolvedNoise};
 use crate::estimate::pipeline::EstimateRun;
 use crate::verdict::validate::{spring_force_n, CurveValidation, Validation};
@@ -165,6 +165,8 @@ pub fn identification_json(
         "log_samples": id.log_samples,
         "block_samples": id.block_samples,
         "dynamic_samples": id.dynamic_samples,
+        "transient_samples": id.transient_samples,
+        "reduced_chi2_with_transients": id.reduced_chi2_with_transients,
         "quasi_static_samples": id.quasi_static_samples,
         "sample_rate_hz": sample_rate_hz,
         "sg_window_samples": id.sg_window,
@@ -305,6 +307,17 @@ pub fn format_identification(id: &Identification, noise: &ResolvedNoise) -> Stri
              parameters left in the model absorb the removed ones (F0 takes d0 when the motion \
              never reverses).",
             id.not_identifiable.join(", ")
+        );
+    }
+    if id.transient_samples > 0 {
+        let _ = writeln!(
+            s,
+            "  transients: {} moving samples left out, within half a window of a force residual \
+             beyond {} standard deviations (reduced chi-square {:.2} with them): starts and stops \
+             sharper than the {:.3} s window resolves (a servo's velocity steps), or glitches in \
+             the log. A motion whose speed changes smoothly (sines, S-curve moves) lets m be \
+             identified from them.",
+            id.transient_samples, TRANSIENT_SIGMAS, id.reduced_chi2_with_transients, id.sg_window_s
         );
     }
     let _ = writeln!(

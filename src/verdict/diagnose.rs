@@ -12,7 +12,9 @@
 //!
 //! with + on loading and - on unloading (at rest, the stroke that came to rest). Position,
 //! velocity and acceleration come from the Savitzky-Golay differentiator; samples where the
-//! motion reverses inside the velocity's noise are left out, since their stroke is unknown.
+//! motion reverses inside the velocity's noise are left out, since their stroke is unknown, and
+//! so are transients the window does not resolve (samples within half a window of a residual
+//! far beyond the residuals' robust spread: a servo's velocity steps), as in identification.
 //! The eight parameters are fitted by Levenberg-Marquardt, each sample weighted by its force
 //! noise plus the smoothed position noise times the local stiffness. Their covariance is a
 //! sandwich over blocks of samples, which stays honest when the residuals are coloured by the
@@ -24,7 +26,7 @@ use serde::Serialize;
 
 use crate::cam::tolerance::{build_curves, build_force_at, Build};
 use crate::design::Design;
-use crate::estimate::identify::SensorNoise;
+use crate::estimate::identify::{SensorNoise, CHI2_RISE_MIN, TRANSIENT_ROUNDS, TRANSIENT_SIGMAS};
 use crate::estimate::log::CalibrationLog;
 use crate::estimate::pipeline::PositionOffset;
 use crate::estimate::sg;
@@ -270,7 +272,8 @@ pub struct Diagnosis {
     pub d2_n_s3_per_mm3: f64,
     /// Reduced chi-square of the fit with its noise weights.
     pub reduced_chi2: f64,
-    /// Samples fitted (reversals inside the velocity noise left out).
+    /// Samples fitted (reversals inside the velocity noise, and transients the window does not
+    /// resolve, left out).
     pub samples: usize,
     /// RMS of the quasi-static force against the design's forward model, as a percent of
     /// the designed force's RMS: the miss.
@@ -341,6 +344,8 @@ const BINS: usize = 30;
 
 /// The fit's prepared samples.
 struct Samples {
+    /// Each sample's index in the smoothed motion.
+    index: Vec<usize>,
     x: Vec<f64>,
     xd: Vec<f64>,
     xdd: Vec<f64>,
@@ -481,6 +486,7 @@ fn prepare(
     levels: &Levels,
     half: usize,
     rests: bool,
+    excluded: &[bool],
 ) -> Samples {
     let n = m.x.len();
     let stroke = strokes(&m.x, levels.turn);
@@ -507,6 +513,7 @@ fn prepare(
     let law = &design.law.law;
     let xmax = design.xmax_mm();
     let mut s = Samples {
+        index: Vec::new(),
         x: Vec::new(),
         xd: Vec::new(),
         xdd: Vec::new(),
@@ -517,7 +524,7 @@ fn prepare(
     };
     for i in (0..n).step_by(stride) {
         let Some(loading) = stroke[i] else { continue };
-        if near_motion[i] || (!rests && still[i]) {
+        if near_motion[i] || (!rests && still[i]) || excluded[i] {
             continue;
         }
         let v = m.xd[i];
@@ -527,6 +534,7 @@ fn prepare(
             _ => 0.0,
         };
         let k = law.stiffness_n_per_mm(m.x[i].clamp(0.0, xmax));
+        s.index.push(i);
         s.x.push(m.x[i]);
         s.xd.push(v);
         s.xdd.push(m.xdd[i]);
@@ -759,7 +767,8 @@ fn fit_at_window(
         )));
     }
     let forces = &log.force_n[diff.half..diff.half + n];
-    let s = prepare(design, &motion, forces, &levels, diff.half, true);
+    let mut excluded = vec![false; n];
+    let s = prepare(design, &motion, forces, &levels, diff.half, true, &excluded);
     let m = s.x.len();
     if m < 200 {
         return Err(DiagnoseError::Log(format!(
@@ -779,22 +788,75 @@ fn fit_at_window(
     // deviations and twice the force noise, it is fitted again without the rests.
     let d0 = fitted.p[5];
     let d0_std = fitted.cov[(5, 5)].max(0.0).sqrt();
+    let (mut fitted, mut s, mut rests) = (fitted, s, true);
     if d0 > 3.0 * d0_std && d0 > 2.0 * levels.var_f.sqrt() {
-        let moving = prepare(design, &motion, forces, &levels, diff.half, false);
+        let moving = prepare(
+            design, &motion, forces, &levels, diff.half, false, &excluded,
+        );
         let m = moving.x.len();
         if m >= 200 {
-            return Ok(WindowFit {
-                fit: fit(design, &moving, block_of(m), fitted.p, free),
-                samples: moving,
-                window_s: diff.window() as f64 * dt,
-            });
+            fitted = fit(design, &moving, block_of(m), fitted.p, free);
+            s = moving;
+            rests = false;
         }
+    }
+    // Transients the window does not resolve (a servo's velocity steps) misplace the inertia
+    // force, and the binned curve would carry it: as in identification, the samples within
+    // half a window of a residual beyond TRANSIENT_SIGMAS of the residuals' robust spread are
+    // left out and the fit repeated, when those residuals raise the chi-square by at least
+    // the window choice's tolerance and half the samples remain.
+    for _ in 0..TRANSIENT_ROUNDS {
+        let r = residuals(design, &s, &fitted.p);
+        let z: Vec<f64> = r.iter().zip(&s.w).map(|(r, w)| r * w.sqrt()).collect();
+        let spread = robust_spread(&z);
+        let mut next = excluded.clone();
+        let mut excess = 0.0;
+        for (k, &zk) in z.iter().enumerate() {
+            let zk = zk / spread;
+            if zk.abs() > TRANSIENT_SIGMAS {
+                excess += zk * zk - 1.0;
+                let i = s.index[k];
+                next[i.saturating_sub(diff.half)..=(i + diff.half).min(n - 1)].fill(true);
+            }
+        }
+        if excess < CHI2_RISE_MIN * s.x.len() as f64 {
+            break;
+        }
+        let kept = prepare(design, &motion, forces, &levels, diff.half, rests, &next);
+        let m = kept.x.len();
+        if 2 * m < s.x.len() || m < 200 {
+            break;
+        }
+        excluded = next;
+        fitted = fit(design, &kept, block_of(m), fitted.p, free);
+        s = kept;
     }
     Ok(WindowFit {
         fit: fitted,
         samples: s,
         window_s: diff.window() as f64 * dt,
     })
+}
+
+/// 1.4826 times the median absolute deviation from the median (the standard deviation of
+/// Gaussian values, unmoved by a few outliers); 1 for fewer than two values.
+fn robust_spread(z: &[f64]) -> f64 {
+    if z.len() < 2 {
+        return 1.0;
+    }
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let mut v = z.to_vec();
+    let centre = median(&mut v);
+    let mut dev: Vec<f64> = z.iter().map(|x| (x - centre).abs()).collect();
+    let mad = median(&mut dev);
+    if mad > 0.0 {
+        1.4826 * mad
+    } else {
+        1.0
+    }
 }
 
 /// Diagnoses a built spring from its calibration log with the design's forward model.

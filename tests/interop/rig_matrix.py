@@ -31,7 +31,7 @@ ROWS = {
     "table-II-d2": Transmission(m=0.055, d0=0.2, d1=1.84, d2=-0.106, f0=2.5),
     "heaviest": Transmission(m=0.5, d0=4.0, d1=3.0, d2=0.0, f0=12.0),
 }
-PROFILES = ["multisine", "trapezoid", "scurve", "force"]
+PROFILES = ["multisine", "trapezoid", "scurve", "force", "servo"]
 KEYS = [("m_n_s2_per_mm", "m"), ("d0_n", "d0"), ("d1_n_s_per_mm", "d1"), ("d2_n_s3_per_mm3", "d2"),
         ("mu_n", "mu"), ("k2_per_mm", "k2"), ("f0_n", "f0")]
 

@@ -9,6 +9,10 @@ controller or a force-controlled test machine produces:
   steps, as a motion controller's does), with holds;
 - ``scurve``: the same moves, jerk-limited: the acceleration ramps over 0.1 s (an S-curve
   motion controller's);
+- ``servo``: ramp-hold at constant speeds (one per ramp) from a velocity command whose steps
+  the servo follows with a first-order lag of 0.05 s: the acceleration is a spike a few
+  samples wide at every start and stop, far shorter than any window that averages the
+  encoder's noise;
 - ``force``: a force-controlled rig: the motor's force follows a smooth command and the
   rod's motion is whatever the transmission makes of it (integrated here with RK4 at a fine
   step), with stick-slip friction: at rest the rod is held by static friction anywhere in
@@ -145,6 +149,35 @@ def scurve(t, levels, vmax, amax, hold, jerk_time, fine=10):
     return average(x), average(xd), average(xdd)
 
 
+def servo_ramps(t, levels, speeds, hold, lag, fine=20):
+    """Ramps between levels at the given speeds with holds between them: a velocity command
+    that steps, followed by a servo with a first-order lag `lag` (its exact solution on a grid
+    `fine` times finer, the command held on each fine step), sampled at t."""
+    dt = (t[1] - t[0]) / fine
+    starts, ends, vs = [], [], []
+    t0, x0 = hold, levels[0]
+    for b, v in zip(levels[1:], speeds):
+        duration = abs(b - x0) / v
+        starts.append(t0)
+        ends.append(t0 + duration)
+        vs.append(v * np.sign(b - x0))
+        t0, x0 = t0 + duration + hold, b
+    starts, ends, vs = np.array(starts), np.array(ends), np.array(vs)
+    tf = t[0] + np.arange(len(t) * fine) * dt
+    k = np.searchsorted(starts, tf, side="right") - 1
+    cmd = np.where((k >= 0) & (tf < ends[np.maximum(k, 0)]), vs[np.maximum(k, 0)], 0.0)
+    decay = math.exp(-dt / lag)
+    x = np.empty_like(tf)
+    v = np.empty_like(tf)
+    xi, vi = float(levels[0]), 0.0
+    for i, c in enumerate(cmd):
+        x[i], v[i] = xi, vi
+        xi += c * dt + (vi - c) * lag * (1.0 - decay)
+        vi = c + (vi - c) * decay
+    a = (cmd - v) / lag
+    return x[::fine], v[::fine], a[::fine]
+
+
 def force_driven(t, tr, f_lo, f_hi, freqs, rng, substeps=20):
     """A force-controlled rig: F(t) commanded, the transmission's motion integrated (RK4 on
     each substep) with Karnopp stick-slip friction: a rod at rest stays at rest while the net
@@ -235,6 +268,11 @@ def motion(tr, rig, profile, t, xmax, speed, rng):
     if profile == "scurve":
         levels = list(rng.uniform(lo, hi, 400))
         x, xd, xdd = scurve(t, levels, vmax=6.0 * speed, amax=8.0 * speed, hold=1.0, jerk_time=0.1)
+        return x, xd, xdd, tr.force(x, xd, xdd)
+    if profile == "servo":
+        levels = list(rng.uniform(lo, hi, 400))
+        speeds = list(rng.uniform(1.0, 4.0, 400) * speed)
+        x, xd, xdd = servo_ramps(t, levels, speeds, hold=2.0, lag=0.05)
         return x, xd, xdd, tr.force(x, xd, xdd)
     if profile == "force":
         f_lo, f_hi = tr.spring(0.02 * xmax), tr.spring(0.98 * xmax)
