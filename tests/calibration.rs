@@ -823,3 +823,46 @@ fn a_servos_velocity_steps_are_left_out_not_read_as_spring() {
         assert!((k2 / truth[6] - 1.0).abs() < 0.02, "seed {seed}: k2 {k2}");
     }
 }
+
+/// A load cell's glitches: three isolated samples 30 to 60 N off on a sines log of the
+/// paper's law. Their residuals, hundreds of standard deviations, raised the reduced
+/// chi-square to 7.2 ("the model does not fit this log"); each is now left out with
+/// the window around it, and the estimates are those of the clean log within a fraction of
+/// their standard deviations.
+#[test]
+fn a_load_cells_glitches_are_left_out_not_fitted() {
+    let (clean, truth) = run(Profile::Sines, 300.0, 11, 0.0);
+    let mut log = clean.clone();
+    for (i, spike) in [(5_000, 40.0), (14_000, -30.0), (23_000, 60.0)] {
+        log.force_n[i] += spike;
+    }
+    let noise = SensorNoise::default();
+    let id = identify(&log, &noise).unwrap();
+    let reference = identify(&clean, &noise).unwrap();
+    assert_eq!(id.adequacy.status, FitStatus::Fits, "{:?}", id.adequacy);
+    assert!(
+        id.reduced_chi2_with_transients > 5.0,
+        "{}",
+        id.reduced_chi2_with_transients
+    );
+    // Three windows at most: each glitch with half a window either side.
+    assert!(
+        id.transient_samples > 0 && id.transient_samples <= 3 * id.sg_window,
+        "{} samples left out at a window of {}",
+        id.transient_samples,
+        id.sg_window
+    );
+    for z in z_scores(&id, &truth).into_iter().flatten() {
+        assert!(z.abs() < 3.0, "{z}");
+    }
+    for (p, e) in id.parameters.iter() {
+        let (Some(v), Some(s), Some(r)) = (e.value, e.std, reference.get(p).value) else {
+            continue;
+        };
+        assert!(
+            (v - r).abs() < 0.5 * s,
+            "{}: {v} against {r} +- {s}",
+            p.key()
+        );
+    }
+}

@@ -314,9 +314,8 @@ pub fn format_identification(id: &Identification, noise: &ResolvedNoise) -> Stri
             s,
             "  transients: {} moving samples left out, within half a window of a force residual \
              beyond {} standard deviations (reduced chi-square {:.2} with them): starts and stops \
-             sharper than the {:.3} s window resolves (a servo's velocity steps), or glitches in \
-             the log. A motion whose speed changes smoothly (sines, S-curve moves) lets m be \
-             identified from them.",
+             sharper than the {:.3} s window resolves (a servo's velocity steps; a motion whose \
+             speed changes smoothly lets m be identified from them), or glitches in the log.",
             id.transient_samples, TRANSIENT_SIGMAS, id.reduced_chi2_with_transients, id.sg_window_s
         );
     }
