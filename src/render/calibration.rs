@@ -408,11 +408,14 @@ pub fn estimate_json(est: &EstimateRun) -> Value {
     let (z, sd) = est.reported_constants();
     let f = run.offset_filter.theta;
     let fs = run.offset_filter.std();
+    // A held state that identification does not resolve has no standard deviation (null),
+    // not a zero one.
+    let std_of = |k: usize| (!(settings.holds(k) && sd[k] == 0.0)).then_some(sd[k]);
     json!({
         "final": {
             "k2_per_mm": z[idx::K2], "k2_per_mm_std": sd[idx::K2],
-            "m_n_s2_per_mm": z[idx::M], "m_n_s2_per_mm_std": sd[idx::M],
-            "d2_n_s3_per_mm3": z[idx::D2], "d2_n_s3_per_mm3_std": sd[idx::D2],
+            "m_n_s2_per_mm": z[idx::M], "m_n_s2_per_mm_std": std_of(idx::M),
+            "d2_n_s3_per_mm3": z[idx::D2], "d2_n_s3_per_mm3_std": std_of(idx::D2),
             "sigma_n_per_mm": z[idx::SIGMA], "sigma_n_per_mm_std": sd[idx::SIGMA],
             "d_n_s_per_mm": z[idx::D], "d_n_s_per_mm_std": sd[idx::D],
             "f0_n": f[0], "f0_n_std": fs[0],
@@ -558,7 +561,15 @@ pub fn format_estimate(est: &EstimateRun) -> String {
         ("sigma", idx::SIGMA, "N/mm (last sample)"),
         ("D", idx::D, "N s/mm (last sample)"),
     ] {
-        let _ = writeln!(s, "  {name:<5} = {:>12.5e} +- {:.2e} {unit}", z[k], sd[k]);
+        if est.settings.holds(k) && sd[k] == 0.0 {
+            let _ = writeln!(
+                s,
+                "  {name:<5} = {:>12.5e} {unit} (held, not estimated: no standard deviation)",
+                z[k]
+            );
+        } else {
+            let _ = writeln!(s, "  {name:<5} = {:>12.5e} +- {:.2e} {unit}", z[k], sd[k]);
+        }
     }
     let _ = writeln!(
         s,

@@ -83,6 +83,9 @@ def test_the_filter_never_diverges_and_is_honest_when_it_says_it_is_consistent(c
     proc, truth = case["estimate"], case["truth"]
     assert proc.returncode in (0, 1), proc.stderr
     j = json.loads(proc.stdout)
+    if json.loads(case["identify"].stdout)["parameters"]["m_n_s2_per_mm"] is None:
+        # Held where identification does not resolve it: no standard deviation, not a zero one.
+        assert "m_n_s2_per_mm" in j["held"] and j["final"]["m_n_s2_per_mm_std"] is None, j["final"]
     if proc.returncode == 1:
         # Flagged: says why and points at identification.
         assert not j["consistency"]["consistent"] and j["consistency"]["reasons"], j["consistency"]
