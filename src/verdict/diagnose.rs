@@ -31,6 +31,7 @@ use crate::estimate::log::CalibrationLog;
 use crate::estimate::pipeline::PositionOffset;
 use crate::estimate::sg;
 use crate::estimate::sim::BuiltSpring;
+use crate::estimate::window::MIN_SIGNAL_SHARE;
 use crate::model::{Follower, ForceLaw, TableLaw};
 use rayon::prelude::*;
 
@@ -289,7 +290,8 @@ pub struct Diagnosis {
     /// Savitzky-Golay window (s): of those tried, the one whose fit explains the log best
     /// (smallest reduced chi-square).
     pub sg_window_s: f64,
-    /// Every window tried (s) with its fit's reduced chi-square (None: it failed).
+    /// Every window tried (s) with its fit's reduced chi-square before transients were left
+    /// out, which the choice compares (None: it failed).
     pub windows_tried: Vec<(f64, Option<f64>)>,
 }
 
@@ -742,6 +744,12 @@ struct WindowFit {
     fit: Fit,
     samples: Samples,
     window_s: f64,
+    /// The smaller share of the velocity's and the acceleration's mean square that is signal.
+    signal_share: f64,
+    /// The reduced chi-square before transients were left out: what the window choice
+    /// compares (leaving samples out lowers it by itself, and a long window that distorts the
+    /// motion's corners would look best).
+    reduced_chi2_with_transients: f64,
 }
 
 /// Smooths the log over `window` samples and fits.
@@ -805,6 +813,8 @@ fn fit_at_window(
     // half a window of a residual beyond TRANSIENT_SIGMAS of the residuals' robust spread are
     // left out and the fit repeated, when those residuals raise the chi-square by at least
     // the window choice's tolerance and half the samples remain.
+    let before = s.x.len();
+    let reduced_chi2_with_transients = fitted.reduced_chi2;
     for _ in 0..TRANSIENT_ROUNDS {
         let r = residuals(design, &s, &fitted.p);
         let z: Vec<f64> = r.iter().zip(&s.w).map(|(r, w)| r * w.sqrt()).collect();
@@ -824,17 +834,33 @@ fn fit_at_window(
         }
         let kept = prepare(design, &motion, forces, &levels, diff.half, rests, &next);
         let m = kept.x.len();
-        if 2 * m < s.x.len() || m < 200 {
+        if 2 * m < before || m < 200 {
             break;
         }
         excluded = next;
         fitted = fit(design, &kept, block_of(m), fitted.p, free);
         s = kept;
     }
+    // How much of the acceleration's and the velocity's spread over the fitted samples is
+    // signal rather than their filtered noise: this fit has no errors-in-variables
+    // correction, so where the noise dominates it attenuates m and d1 towards zero.
+    let share = |values: &[f64], noise: f64| {
+        let total = values.iter().map(|v| v * v).sum::<f64>() / values.len().max(1) as f64;
+        if total > 0.0 {
+            (1.0 - noise / total).max(0.0)
+        } else {
+            0.0
+        }
+    };
+    let var_xd = diff.noise_variance(sg::VELOCITY, noise.position_variance_mm2, dt);
+    let var_xdd = diff.noise_variance(sg::ACCELERATION, noise.position_variance_mm2, dt);
+    let signal_share = share(&s.xd, var_xd).min(share(&s.xdd, var_xdd));
     Ok(WindowFit {
         fit: fitted,
         samples: s,
         window_s: diff.window() as f64 * dt,
+        signal_share,
+        reduced_chi2_with_transients,
     })
 }
 
@@ -919,14 +945,25 @@ pub fn diagnose(
         .zip(&windows)
         .map(|(t, &w)| (w as f64 * dt, t.as_ref().ok().map(|f| f.fit.reduced_chi2)))
         .collect();
+    // Windows where the filtered noise makes up more than three quarters of the velocity's or
+    // the acceleration's mean square are not compared (half the best share, where no window
+    // reaches a quarter): there the fit's m and d1 sink towards zero, and leaving transients
+    // out can then make it look best.
+    let best_share = tried
+        .iter()
+        .filter_map(|t| t.as_ref().ok())
+        .map(|f| f.signal_share)
+        .fold(0.0_f64, f64::max);
+    let min_share = MIN_SIGNAL_SHARE.min(0.5 * best_share);
     let mut best: Option<WindowFit> = None;
     let mut first_error = None;
     for t in tried {
         match t {
             Ok(f) => {
-                if best
-                    .as_ref()
-                    .is_none_or(|b| f.fit.reduced_chi2 < b.fit.reduced_chi2)
+                if f.signal_share >= min_share
+                    && best.as_ref().is_none_or(|b| {
+                        f.reduced_chi2_with_transients < b.reduced_chi2_with_transients
+                    })
                 {
                     best = Some(f);
                 }
@@ -940,6 +977,7 @@ pub fn diagnose(
         fit,
         samples: s,
         window_s,
+        ..
     }) = best
     else {
         return Err(

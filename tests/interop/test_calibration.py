@@ -285,14 +285,25 @@ def test_the_twins_move_smoothly_when_a_fine_encoder_lets_identification_use_a_s
     assert abs(final["k2_per_mm"] / truth["k2"] - 1.0) < 0.005, final["k2_per_mm"]
 
 
-@pytest.mark.parametrize("row,seed", [("table-I", 2), ("heaviest", 0)])
-def test_validate_judges_a_servos_ramp_holds_without_their_transients(tmp_path, row, seed):
+@pytest.mark.parametrize("row,seed,profile,noise,seconds", [
+    ("table-I", 2, "servo", 1.0, 300.0), ("heaviest", 0, "servo", 1.0, 300.0),
+    ("default", 1, "servo", 1.0, 300.0), ("issue", 5, "trapezoid", 4.0, 120.0),
+    ("issue", 2, "scurve", 1.0, 300.0)])
+def test_validate_judges_a_servos_ramp_holds_without_their_transients(tmp_path, row, seed, profile, noise, seconds):
     """A servo's velocity steps put the inertia force in spikes a few samples wide that the
     diagnosis's smoothed acceleration spreads over its window. Taken into the binned
     quasi-static curve, they failed the true law on force_max (3.1 % on Table I seed 2, 3.6 %
-    on the heaviest row seed 0, at a 3 % tolerance) until the transients were left out."""
+    on the heaviest row seed 0, 5.9 % on the default row seed 1, at a 3 % tolerance) until the
+    transients were left out and the diagnosis stopped comparing windows whose velocity or
+    acceleration is mostly noise (its fit has no errors-in-variables correction: there m and d1
+    sank to zero). The other two guard the window choice: at four times the paper's noise
+    (trapezoid), leaving out transients at a noise-dominated window made it look best and failed
+    the true law at 3.6 %; on an S-curve log, leaving out the corners a 3.2 s window distorts
+    made that window look best (3.3 %). Windows are compared by their chi-square before
+    transients are left out."""
     tr = MATRIX_ROWS[row]
-    t, f, x, _ = run(tr, Rig(seed=seed), "servo", 300.0)
+    rig = Rig(seed=seed, force_variance=0.017 * noise, position_variance=0.01 * noise)
+    t, f, x, _ = run(tr, rig, profile, seconds)
     log = tmp_path / "servo.tsv"
     write_rig_log(log, t, f, x, style="tab")
     right = camspring("validate", spec(tmp_path / "true.toml", tr, 1.0), log, "--tolerance", "3%", "--json")
