@@ -590,7 +590,6 @@ fn error_draws_have_identifications_covariance() {
 /// averaged over `jerk_s`). Returns the log (100 Hz, the paper's sensor noise) and the truth in
 /// model order.
 fn motion_controller_log(seed: u64, jerk_s: f64) -> (CalibrationLog, [f64; 7]) {
-    let (m, d0, d1, d2, mu, f0, k2) = (0.39, 3.82, 1.84, -0.0108, 0.9251, 13.75, 0.2586);
     let (vmax, amax, hold, rate, seconds): (f64, f64, f64, f64, f64) =
         (6.0, 8.0, 1.0, 100.0, 300.0);
     let mut rng = StdRng::seed_from_u64(seed);
@@ -631,10 +630,7 @@ fn motion_controller_log(seed: u64, jerk_s: f64) -> (CalibrationLog, [f64; 7]) {
             (to, 0.0, 0.0)
         }
     };
-    let force_noise = Normal::new(0.0, 0.017_f64.sqrt()).unwrap();
-    let position_noise = Normal::new(0.0, 0.01_f64.sqrt()).unwrap();
-    let mut log = CalibrationLog::default();
-    let mut sign = 1.0;
+    let mut rig = TableIRig::new();
     for i in 0..(seconds * rate) as usize {
         let t = i as f64 / rate;
         let (x, v, a) = if jerk_s > 0.0 {
@@ -649,15 +645,46 @@ fn motion_controller_log(seed: u64, jerk_s: f64) -> (CalibrationLog, [f64; 7]) {
         } else {
             trapezoid(t)
         };
-        if v.abs() > 1e-9 {
-            sign = v.signum();
-        }
-        let force = m * a + d0 * sign + d1 * v + d2 * v * v * v + mu * (k2 * x).exp() + f0;
-        log.t_s.push(t);
-        log.force_n.push(force + force_noise.sample(&mut rng));
-        log.position_mm.push(x + position_noise.sample(&mut rng));
+        rig.record(&mut rng, t, x, v, a);
     }
-    (log, [m, d0, d1, d2, mu, f0, k2])
+    (rig.log, TABLE_I)
+}
+
+/// The paper's Table I transmission in model order: m, d0, d1, d2, mu, F0, k2.
+const TABLE_I: [f64; 7] = [0.39, 3.82, 1.84, -0.0108, 0.9251, 13.75, 0.2586];
+
+/// A rig log of the Table I transmission, sample by sample: the force of eq. (9), its
+/// friction holding the sign of the last motion at rest, and the paper's sensor noise.
+struct TableIRig {
+    log: CalibrationLog,
+    sign: f64,
+    force_noise: Normal<f64>,
+    position_noise: Normal<f64>,
+}
+
+impl TableIRig {
+    fn new() -> TableIRig {
+        TableIRig {
+            log: CalibrationLog::default(),
+            sign: 1.0,
+            force_noise: Normal::new(0.0, 0.017_f64.sqrt()).unwrap(),
+            position_noise: Normal::new(0.0, 0.01_f64.sqrt()).unwrap(),
+        }
+    }
+
+    /// Logs the sample at time `t` of a motion at `x`, `v`, `a` (mm, mm/s, mm/s^2).
+    fn record(&mut self, rng: &mut StdRng, t: f64, x: f64, v: f64, a: f64) {
+        let [m, d0, d1, d2, mu, f0, k2] = TABLE_I;
+        if v.abs() > 1e-9 {
+            self.sign = v.signum();
+        }
+        let force = m * a + d0 * self.sign + d1 * v + d2 * v * v * v + mu * (k2 * x).exp() + f0;
+        self.log.t_s.push(t);
+        self.log.force_n.push(force + self.force_noise.sample(rng));
+        self.log
+            .position_mm
+            .push(x + self.position_noise.sample(rng));
+    }
 }
 
 /// Identification on a motion controller's moves, trapezoidal and jerk-limited: the
@@ -738,7 +765,6 @@ fn an_uncertain_position_noise_widens_each_estimate_by_what_it_moves() {
 /// 40 mm/s^2 and 16 N of inertia force). Friction holds the rod at rest with the sign of the
 /// last motion. Returns the log (100 Hz, the paper's sensor noise) and the truth in model order.
 fn servo_ramp_log(seed: u64, lag_s: f64) -> (CalibrationLog, [f64; 7]) {
-    let (m, d0, d1, d2, mu, f0, k2) = (0.39, 3.82, 1.84, -0.0108, 0.9251, 13.75, 0.2586);
     let (hold, rate, seconds, fine) = (2.0, 100.0, 300.0, 20);
     let mut rng = StdRng::seed_from_u64(seed);
     let level = rand_distr::Uniform::new(1.8, 13.2).unwrap();
@@ -759,22 +785,12 @@ fn servo_ramp_log(seed: u64, lag_s: f64) -> (CalibrationLog, [f64; 7]) {
             _ => 0.0,
         }
     };
-    let force_noise = Normal::new(0.0, 0.017_f64.sqrt()).unwrap();
-    let position_noise = Normal::new(0.0, 0.01_f64.sqrt()).unwrap();
-    let (mut x, mut v, mut sign): (f64, f64, f64) = (7.5, 0.0, 1.0);
+    let (mut x, mut v): (f64, f64) = (7.5, 0.0);
     let h = 1.0 / (rate * fine as f64);
-    let mut log = CalibrationLog::default();
+    let mut rig = TableIRig::new();
     for i in 0..(seconds * rate) as usize {
         let t = i as f64 / rate;
-        let c = command(t);
-        let a = (c - v) / lag_s;
-        if v.abs() > 1e-9 {
-            sign = v.signum();
-        }
-        let force = m * a + d0 * sign + d1 * v + d2 * v * v * v + mu * (k2 * x).exp() + f0;
-        log.t_s.push(t);
-        log.force_n.push(force + force_noise.sample(&mut rng));
-        log.position_mm.push(x + position_noise.sample(&mut rng));
+        rig.record(&mut rng, t, x, v, (command(t) - v) / lag_s);
         // The lag's exact solution over each fine step, the command held.
         for j in 0..fine {
             let c = command(t + j as f64 * h);
@@ -783,7 +799,7 @@ fn servo_ramp_log(seed: u64, lag_s: f64) -> (CalibrationLog, [f64; 7]) {
             v = c + (v - c) * decay;
         }
     }
-    (log, [m, d0, d1, d2, mu, f0, k2])
+    (rig.log, TABLE_I)
 }
 
 /// A servo's velocity steps are shorter than any window that averages the encoder's noise:
