@@ -1243,13 +1243,8 @@ pub(super) fn fit_model(
     // where it is. The residual there stands out far beyond its noise; every sample whose
     // filtered values it reaches (half a window each side) is left out and the fit repeated.
     let moving_samples = rows.f.len();
-    let reduced_chi2_with_transients = {
-        let weights = weights_at(&p, &rows);
-        let chi2: f64 = (0..rows.f.len())
-            .map(|i| weights[i] * (rows.f[i] - model(&p, &rows, i).0).powi(2))
-            .sum();
-        chi2 / (rows.f.len() - active.iter().filter(|a| **a).count()).max(1) as f64
-    };
+    let reduced_chi2_with_transients =
+        reduced_chi_square(&p, &rows, &active, &weights_at(&p, &rows));
     for _ in 0..TRANSIENT_ROUNDS {
         let weights = weights_at(&p, &rows);
         let mut next = excluded.clone();
@@ -1259,7 +1254,7 @@ pub(super) fn fit_model(
             if z.abs() > TRANSIENT_SIGMAS {
                 excess += z * z - 1.0;
                 let s = rows.index[i];
-                next[s.saturating_sub(h)..=(s + h).min(n - 1)].fill(true);
+                mark_window(&mut next, s, h);
             }
         }
         // At rest the friction is anywhere in +-d0, so a resting sample is a transient where
@@ -1273,7 +1268,7 @@ pub(super) fn fit_model(
             if frictionless.abs() > d0 + TRANSIENT_SIGMAS * sd {
                 let z = (frictionless.abs() - d0) / sd;
                 excess += z * z - 1.0;
-                next[i.saturating_sub(h)..=(i + h).min(n - 1)].fill(true);
+                mark_window(&mut next, i, h);
             }
         }
         // A few outliers that raise the reduced chi-square by less than the window choice
@@ -1304,10 +1299,7 @@ pub(super) fn fit_model(
         .map(|&k| jtj[(k, k)] / raw[(k, k)])
         .fold(1.0_f64, f64::min);
     let m = rows.f.len();
-    let chi2: f64 = (0..m)
-        .map(|i| weights[i] * (rows.f[i] - model(&p, &rows, i).0).powi(2))
-        .sum();
-    let dof = (m - active.iter().filter(|a| **a).count()) as f64;
+    let reduced_chi2 = reduced_chi_square(&p, &rows, &active, &weights);
     let (cov, covariance_method) = sandwich(&p, &rows, &active, &weights, diff.window())
         .ok_or_else(|| IdentifyError::NoConvergence("singular covariance".into()))?;
     let eig = eigenvalues(scaled(&jtj, &active)).ok_or_else(|| {
@@ -1325,7 +1317,7 @@ pub(super) fn fit_model(
         .map(|i| (rows.f[i] - model(&p, &rows, i).0) * weights[i].sqrt())
         .collect();
     let adequacy = Adequacy::new(
-        chi2 / dof,
+        reduced_chi2,
         whiteness(&residuals, &rows.index, diff.window()),
     );
     let parameters = Estimates(std::array::from_fn(|k| {
@@ -1356,7 +1348,7 @@ pub(super) fn fit_model(
         covariance_parameters: idx.iter().map(|&k| PARAMS[k].to_string()).collect(),
         covariance_method,
         condition_number,
-        reduced_chi2: chi2 / dof,
+        reduced_chi2,
         residual_rms_n: rms,
         samples: log.len(),
         log_samples: log.len(),
@@ -1378,6 +1370,26 @@ pub(super) fn fit_model(
         reduced_chi2_noise_change: 0.0,
         signal_share,
     })
+}
+
+/// The weighted chi-square of the fit at `p` over `r` per degree of freedom.
+fn reduced_chi_square(p: &V7, r: &Rows, active: &Active, weights: &[f64]) -> f64 {
+    let chi2: f64 = (0..r.f.len())
+        .map(|i| weights[i] * (r.f[i] - model(p, r, i).0).powi(2))
+        .sum();
+    let dof =
+        r.f.len()
+            .saturating_sub(active.iter().filter(|a| **a).count());
+    chi2 / dof.max(1) as f64
+}
+
+/// Marks the samples within `half` of `centre` in `mask` (the samples a transient at `centre`
+/// reaches through a filter of that half width).
+pub(crate) fn mark_window(mask: &mut [bool], centre: usize, half: usize) {
+    let end = (centre + half).min(mask.len().saturating_sub(1));
+    if let Some(window) = mask.get_mut(centre.saturating_sub(half)..=end) {
+        window.fill(true);
+    }
 }
 
 /// Two-sided tail probability P(|Z| > z) of a standard normal Z.

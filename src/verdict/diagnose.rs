@@ -26,7 +26,9 @@ use serde::Serialize;
 
 use crate::cam::tolerance::{build_curves, build_force_at, Build};
 use crate::design::Design;
-use crate::estimate::identify::{SensorNoise, CHI2_RISE_MIN, TRANSIENT_ROUNDS, TRANSIENT_SIGMAS};
+use crate::estimate::identify::{
+    mark_window, SensorNoise, CHI2_RISE_MIN, TRANSIENT_ROUNDS, TRANSIENT_SIGMAS,
+};
 use crate::estimate::log::CalibrationLog;
 use crate::estimate::pipeline::PositionOffset;
 use crate::estimate::sg;
@@ -826,7 +828,7 @@ fn fit_at_window(
             if zk.abs() > TRANSIENT_SIGMAS {
                 excess += zk * zk - 1.0;
                 let i = s.index[k];
-                next[i.saturating_sub(diff.half)..=(i + diff.half).min(n - 1)].fill(true);
+                mark_window(&mut next, i, diff.half);
             }
         }
         if excess < CHI2_RISE_MIN * s.x.len() as f64 {
