@@ -116,12 +116,13 @@ pub fn candidate_windows(n: usize, dt: f64) -> Vec<usize> {
 /// A short window passes much position noise into the velocity and acceleration, so the
 /// estimates are unbiased (the errors-in-variables correction) but noisy; a long one lowers the
 /// noise but distorts the motion, which biases them. The fit is made at windows from
-/// [`SHORTEST_WINDOW_S`] to [`LONGEST_WINDOW_S`] (ratio [`WINDOW_RATIO`]). Windows that
-/// do not fit the log ([`super::adequacy::Adequacy`]), or that identify fewer parameters than the best (their
-/// corrected information on m, d2 or d1 is
-/// noise), or at which the velocity noise hides more than half of the samples that move at
-/// the best window, are not compared: leaving out a force the log carries, or most of the
-/// motion, biases the rest. Among the
+/// [`SHORTEST_WINDOW_S`] to [`LONGEST_WINDOW_S`] (ratio [`WINDOW_RATIO`]). Compared are, in
+/// turn: the windows whose fit explains the log ([`super::adequacy::Adequacy`]; all, if none
+/// does); of those, the ones where m's, d1's and d2's information is at least
+/// [`MIN_SIGNAL_SHARE`] signal (a window where m's is less is fitted again without m); of
+/// those, the ones that identify as many parameters as the best, and at which at least half
+/// as many samples move: leaving out a force the log carries, or most of the motion, biases
+/// the rest. Among the
 /// others, in order of length, the chosen window is the longest whose every estimate agrees
 /// with the estimate of every shorter window within [`BALANCING_SIGMAS`] standard deviations
 /// of their difference, taken as sqrt(s_short^2 - s_long^2) (at least half of s_short): the
