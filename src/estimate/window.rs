@@ -120,9 +120,10 @@ pub fn candidate_windows(n: usize, dt: f64) -> Vec<usize> {
 /// turn: the windows whose fit explains the log ([`super::adequacy::Adequacy`]; all, if none
 /// does); of those, the ones where m's, d1's and d2's information is at least
 /// [`MIN_SIGNAL_SHARE`] signal (a window where m's is less is fitted again without m); of
-/// those, the ones that identify as many parameters as the best, and at which at least half
-/// as many samples move: leaving out a force the log carries, or most of the motion, biases
-/// the rest. Among the
+/// those, the ones that identify as many parameters as the best, and at which at least a
+/// quarter as many samples move: leaving out a force the log carries, or most of the motion
+/// (transients left out at a long window), biases the rest; samples the velocity's noise band
+/// hides at a short window are left out without bias. Among the
 /// others, in order of length, the chosen window is the longest whose every estimate agrees
 /// with the estimate of every shorter window within [`BALANCING_SIGMAS`] standard deviations
 /// of their difference, taken as sqrt(s_short^2 - s_long^2) (at least half of s_short): the
@@ -154,7 +155,11 @@ pub fn choose_window(
     //    compared; a parameter is rather given up at a shorter window (the threshold is
     //    lowered for a log on which no window reaches it).
     // 3. The windows that keep the most parameters, and of those the ones that move at least
-    //    half as many samples as the most (transients left out at a long window cost many).
+    //    a quarter as many samples as the most (transients left out at a long window cost
+    //    many). The velocity's noise band hides slow motion at short windows; the samples it
+    //    hides are chosen by a kernel whose noise the regressors do not share, so leaving them
+    //    out costs precision, not bias. At half (until 2026-11-26) a noisy light trapezoid log
+    //    compared only windows from 1.7 s, which round the moves' corners: m at z +3.5.
     let ok = || fits.iter().filter_map(|f| f.as_ref().ok());
     let fits_somewhere = ok().any(|id| id.adequacy.status == FitStatus::Fits);
     let explains = |id: &Identification| !fits_somewhere || id.adequacy.status == FitStatus::Fits;
@@ -212,7 +217,7 @@ pub fn choose_window(
             fits[i].as_ref().is_ok_and(|id| {
                 resolved(id)
                     && id.not_identifiable.len() == fewest_missing
-                    && 2 * id.dynamic_samples >= most_moving
+                    && 4 * id.dynamic_samples >= most_moving
             })
         })
         .collect();
