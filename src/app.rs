@@ -879,6 +879,8 @@ pub fn run_validate(
             if let (Some(e), Some(c)) = (exponents, v.criteria.iter_mut().find(|c| c.name == "k2"))
             {
                 c.deviation_percent = e.k2_deviation_percent(judged_k2, judged_k2_std);
+                c.deviation_upper_percent =
+                    Some(e.k2_deviation_upper_percent(judged_k2, judged_k2_std));
                 c.pass =
                     c.deviation_percent.is_finite() && c.deviation_percent <= c.tolerance_percent;
                 c.what = if consistent {
@@ -895,6 +897,7 @@ pub fn run_validate(
             let (c, cov) = judge_coverage(v.range_min_mm, v.range_max_mm);
             v.pass &= c.pass;
             v.criteria.push(c);
+            v.conclusive = crate::verdict::validate::conclusive(v.pass, &v.criteria);
             v.coverage = Some(cov);
             v.diagnosis = diagnosis.clone();
             // The measured force-deflection points come from the quasi-static curve.
@@ -927,6 +930,7 @@ pub fn run_validate(
             let (c, cov) = judge_coverage(v.range_min_mm, v.range_max_mm);
             v.pass &= c.pass;
             v.criteria.push(c);
+            v.conclusive = crate::verdict::validate::conclusive(v.pass, &v.criteria);
             v.coverage = Some(cov);
             v.diagnosis = diagnosis.clone();
             let svg_text = curve_validation_svg(&v);

@@ -599,7 +599,7 @@ pub fn format_validation(v: &Validation) -> String {
     let _ = writeln!(
         s,
         "{}  against F = {:.6} N * exp({:.6} /mm * x) + {:.6} N over x = {:.3} ... {:.3} mm",
-        if v.pass { "PASS" } else { "FAIL" },
+        crate::verdict::validate::verdict_word(v.pass, v.conclusive),
         v.designed.mu_n,
         v.designed.k2_per_mm,
         v.designed.f0_n,
@@ -750,21 +750,29 @@ pub fn validation_svg(v: &Validation, run: &EkfRun) -> String {
     plot::document(&[stiffness, convergence], 620.0, 460.0).to_string()
 }
 
-/// A verdict's criteria, one line each.
+/// A verdict's criteria, one line each (with the deviation's upper bound where it has one),
+/// then what the log leaves open.
 fn criteria_lines(criteria: &[crate::verdict::validate::Criterion]) -> String {
-    criteria
+    use crate::verdict::validate::{criterion_word, not_shown_notes};
+    let mut s: String = criteria
         .iter()
         .map(|c| {
             format!(
-                "  {}  {:<22} {:>8.3} % (tolerance {:.3} %)  {}\n",
-                if c.pass { "PASS" } else { "FAIL" },
+                "  {:<9} {:<22} {:>8.3} % ({}tolerance {:.3} %)  {}\n",
+                criterion_word(c),
                 c.name,
                 c.deviation_percent,
+                c.deviation_upper_percent
+                    .map_or(String::new(), |u| format!("up to {u:.3} %; ")),
                 c.tolerance_percent,
                 c.what
             )
         })
-        .collect()
+        .collect();
+    for note in not_shown_notes(criteria) {
+        s.push_str(&format!("  not conclusive: {note}\n"));
+    }
+    s
 }
 
 /// Where a measured curve leaves the band of builds, one line each.
@@ -786,7 +794,7 @@ pub fn format_curve_validation(v: &CurveValidation) -> String {
     let _ = writeln!(
         s,
         "{}  quasi-static force curve against the designed law over x = {:.3} ... {:.3} mm",
-        if v.pass { "PASS" } else { "FAIL" },
+        crate::verdict::validate::verdict_word(v.pass, v.conclusive),
         v.range_min_mm,
         v.range_max_mm
     );

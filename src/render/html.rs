@@ -17,7 +17,7 @@ table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #ccc;padding
 text-align:left;vertical-align:top}th{background:#f4f4f4}td.num{text-align:right;\
 font-variant-numeric:tabular-nums}.pass{color:#fff;background:#2a7d2a}.warn{color:#000;\
 background:#f0c000}.fail{color:#fff;background:#b22222}.badge{padding:.1em .5em;\
-border-radius:.3em;font-weight:bold}figure{margin:1em 0}figure svg{max-width:100%;height:auto;\
+border-radius:.3em;font-weight:bold;white-space:nowrap}figure{margin:1em 0}figure svg{max-width:100%;height:auto;\
 border:1px solid #eee}nav a{margin-right:1em}code{background:#f4f4f4;padding:0 .2em}";
 
 /// Escapes text for HTML.
@@ -31,7 +31,7 @@ pub(crate) fn escape(text: &str) -> String {
 fn badge(status: &str) -> String {
     let class = match status {
         "pass" | "PASS" => "pass",
-        "warn" | "WARN" => "warn",
+        "warn" | "WARN" | "NOT SHOWN" | "PASS, NOT CONCLUSIVE" => "warn",
         _ => "fail",
     };
     format!(
@@ -392,18 +392,30 @@ pub fn report_html(
     h
 }
 
-/// The rows of a verdict's criteria table.
+/// A verdict's criteria table (after its header row), closed, then what the log leaves open.
 fn criteria_rows(h: &mut String, criteria: &[crate::verdict::validate::Criterion]) {
+    use crate::verdict::validate::{criterion_word, not_shown_notes};
     for c in criteria {
         let _ = writeln!(
             h,
-            "<tr><td>{}</td><td>{}</td><td class=\"num\">{:.3} %</td><td class=\"num\">{:.3} %</td><td>{}</td></tr>",
-            badge(if c.pass { "pass" } else { "fail" }),
+            "<tr><td>{}</td><td>{}</td><td class=\"num\">{:.3} %</td><td class=\"num\">{}</td><td class=\"num\">{:.3} %</td><td>{}</td></tr>",
+            badge(criterion_word(c)),
             escape(c.name),
             c.deviation_percent,
+            c.deviation_upper_percent
+                .map_or("&ndash;".to_string(), |u| format!("{u:.3} %")),
             c.tolerance_percent,
             escape(c.what)
         );
+    }
+    h.push_str("</table>\n");
+    let notes = not_shown_notes(criteria);
+    if !notes.is_empty() {
+        h.push_str("<p><strong>Not conclusive:</strong></p>\n<ul>\n");
+        for n in notes {
+            let _ = writeln!(h, "<li>{}</li>", escape(&n));
+        }
+        h.push_str("</ul>\n");
     }
 }
 
@@ -416,7 +428,7 @@ pub fn validation_html(
     diagnosis_html: &str,
 ) -> String {
     let mut h = String::with_capacity(128 * 1024);
-    let verdict = if v.pass { "PASS" } else { "FAIL" };
+    let verdict = crate::verdict::validate::verdict_word(v.pass, v.conclusive);
     let _ = write!(
         h,
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\
@@ -426,7 +438,7 @@ pub fn validation_html(
          Identified from the log: F(x) = {:.7} N &middot; exp({:.7} /mm &middot; x) + {:.7} N. \
          EKF k2 = {:.7} &plusmn; {:.7} /mm. Deflections in the log: {:.3} to {:.3} mm.</p>\n\
          <h2>Criteria</h2>\n<table><tr><th>status</th><th>criterion</th><th>deviation</th>\
-         <th>tolerance</th><th>what</th></tr>\n",
+         <th>upper bound</th><th>tolerance</th><th>what</th></tr>\n",
         badge(verdict),
         v.designed.mu_n,
         v.designed.k2_per_mm,
@@ -441,7 +453,7 @@ pub fn validation_html(
         log = escape(log_name),
     );
     criteria_rows(&mut h, &v.criteria);
-    h.push_str("</table>\n<h2>Stiffness against force, and convergence</h2>\n");
+    h.push_str("<h2>Stiffness against force, and convergence</h2>\n");
     h.push_str(&figure(
         validation_svg,
         "Left: EKF stiffness against spring force over the converged half of the run, with the \
@@ -492,7 +504,7 @@ pub fn curve_validation_html(
     diagnosis_html: &str,
 ) -> String {
     let mut h = String::with_capacity(64 * 1024);
-    let verdict = if v.pass { "PASS" } else { "FAIL" };
+    let verdict = crate::verdict::validate::verdict_word(v.pass, v.conclusive);
     let _ = write!(
         h,
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\
@@ -503,7 +515,7 @@ pub fn curve_validation_html(
          d2 = {:.3e} N s&sup3;/mm&sup3;) and Coulomb friction (d0 = {:.4} N) fitted and taken out, \
          the rest averaged in {} bins over {:.3} to {:.3} mm.</p>\n\
          <h2>Criteria</h2>\n<table><tr><th>status</th><th>criterion</th><th>deviation</th>\
-         <th>tolerance</th><th>what</th></tr>\n",
+         <th>upper bound</th><th>tolerance</th><th>what</th></tr>\n",
         badge(verdict),
         v.removed_m_n_s2_per_mm,
         v.removed_d1_n_s_per_mm,
@@ -515,7 +527,7 @@ pub fn curve_validation_html(
         log = escape(log_name),
     );
     criteria_rows(&mut h, &v.criteria);
-    h.push_str("</table>\n<h2>Force curve</h2>\n");
+    h.push_str("<h2>Force curve</h2>\n");
     h.push_str(&figure(
         validation_svg,
         "Left: the measured force with the dynamics removed, binned, and the designed law. \

@@ -47,6 +47,72 @@ pub struct Criterion {
     pub tolerance_percent: f64,
     /// Whether it passes.
     pub pass: bool,
+    /// The deviation's upper bound (percent): the measured deviation plus two standard
+    /// deviations of the log's own uncertainty, where the criterion has one. A pass whose
+    /// upper bound exceeds the tolerance is not shown by this log: a build off by more than
+    /// the tolerance could have given it ([`Criterion::shown`]). None where the deviation
+    /// carries no uncertainty (coverage) or none is estimated.
+    pub deviation_upper_percent: Option<f64>,
+}
+
+impl Criterion {
+    /// Whether the log shows this criterion's verdict: a failure always (its deviation lies
+    /// beyond the uncertainty already), a pass when the deviation's upper bound is within the
+    /// tolerance.
+    pub fn shown(&self) -> bool {
+        !self.pass
+            || self
+                .deviation_upper_percent
+                .is_none_or(|u| u <= self.tolerance_percent)
+    }
+}
+
+/// The verdict in one word or three: PASS, FAIL, or PASS, NOT CONCLUSIVE.
+pub fn verdict_word(pass: bool, conclusive: bool) -> &'static str {
+    match (pass, conclusive) {
+        (false, _) => "FAIL",
+        (true, true) => "PASS",
+        (true, false) => "PASS, NOT CONCLUSIVE",
+    }
+}
+
+/// One criterion's status: pass, fail, or "not shown" (a pass whose upper bound exceeds the
+/// tolerance).
+pub fn criterion_word(c: &Criterion) -> &'static str {
+    match (c.pass, c.shown()) {
+        (false, _) => "FAIL",
+        (true, true) => "PASS",
+        (true, false) => "NOT SHOWN",
+    }
+}
+
+/// For each passing criterion the log does not show, what it leaves open and what narrows it.
+pub fn not_shown_notes(criteria: &[Criterion]) -> Vec<String> {
+    criteria
+        .iter()
+        .filter(|c| !c.shown())
+        .map(|c| {
+            let upper = c.deviation_upper_percent.unwrap_or(f64::INFINITY);
+            let narrows = match c.name {
+                "k2" => {
+                    "a longer log, or one over more of the stroke, narrows k2 (identify says how much longer)"
+                }
+                _ => "more passes over the stroke, or a longer log, narrow the bins' standard errors",
+            };
+            format!(
+                "{} is not shown within its tolerance: within two standard deviations of this \
+                 log's uncertainty it could be {upper:.3} % against {:.3} %, so a build that \
+                 misses the tolerance could have passed; {narrows}",
+                c.name, c.tolerance_percent
+            )
+        })
+        .collect()
+}
+
+/// Whether a verdict is shown by its log: a failure always, a pass when every criterion's is
+/// ([`Criterion::shown`]).
+pub fn conclusive(pass: bool, criteria: &[Criterion]) -> bool {
+    !pass || criteria.iter().all(Criterion::shown)
 }
 
 /// A stretch of the stroke where the measured force leaves the band of builds.
@@ -112,6 +178,7 @@ pub fn band_criterion(
         deviation_percent: 100.0 * worst_rel,
         tolerance_percent: 0.0,
         pass: exits.is_empty(),
+        deviation_upper_percent: None,
     };
     (criterion, exits)
 }
@@ -121,6 +188,10 @@ pub fn band_criterion(
 pub struct Validation {
     /// All criteria pass.
     pub pass: bool,
+    /// The log shows the verdict: a failure, or a pass whose every criterion's upper bound
+    /// is within its tolerance ([`conclusive`]). A pass that is not conclusive could have
+    /// come from a build off by more than the tolerance.
+    pub conclusive: bool,
     /// The criteria.
     pub criteria: Vec<Criterion>,
     /// The designed law.
@@ -192,6 +263,7 @@ pub fn validate_with(
             deviation_percent: deviation,
             tolerance_percent: tol,
             pass: deviation.is_finite() && deviation <= tol,
+            deviation_upper_percent: None,
         })
     };
     let (k2, k2_std) = match run {
@@ -287,8 +359,16 @@ pub fn validate_with(
             );
         }
     }
+    if let Some(c) = criteria.iter_mut().find(|c| c.name == "k2") {
+        c.deviation_upper_percent = Some(if k2_std.is_finite() {
+            100.0 * ((k2 - designed.k2_per_mm).abs() + 2.0 * k2_std) / designed.k2_per_mm
+        } else {
+            f64::INFINITY
+        });
+    }
     Validation {
         pass: criteria.iter().all(|c| c.pass),
+        conclusive: true,
         criteria,
         designed: *designed,
         exponents: None,
@@ -325,6 +405,8 @@ pub struct CurveBin {
 pub struct CurveValidation {
     /// All criteria pass.
     pub pass: bool,
+    /// The log shows the verdict ([`Validation::conclusive`]).
+    pub conclusive: bool,
     /// The criteria.
     pub criteria: Vec<Criterion>,
     /// The dynamics taken out of the force: m (N s^2/mm), d0 (N), d1 (N s/mm), d2 (N s^3/mm^3).
@@ -488,6 +570,7 @@ pub fn validate_curve(
                 deviation_percent: deviation,
                 tolerance_percent: tol,
                 pass: deviation.is_finite() && deviation <= tol,
+                deviation_upper_percent: None,
             })
             .collect();
             (criteria, Vec::new())
@@ -495,6 +578,7 @@ pub fn validate_curve(
     };
     CurveValidation {
         pass: !bins.is_empty() && criteria.iter().all(|c: &Criterion| c.pass),
+        conclusive: true,
         criteria,
         removed_m_n_s2_per_mm: m,
         removed_d0_n: d0,
@@ -588,6 +672,7 @@ pub fn coverage(
         deviation_percent: 100.0 * (1.0 - fraction),
         tolerance_percent: 100.0 * (1.0 - MIN_STROKE_COVERED),
         pass: fraction >= MIN_STROKE_COVERED,
+        deviation_upper_percent: None,
     };
     (
         criterion,
@@ -660,12 +745,21 @@ pub fn stroke_criteria(
             // rig's trapezoidal moves with Table I's friction, bins scattered 1.3 % RMS about
             // the true law, and the largest reached 3.25 % against a 3 % tolerance).
             let (mut sq, mut dsq, mut max) = (0.0_f64, 0.0_f64, 0.0_f64);
+            // The squared RMS's upper bound adds two standard deviations of its estimate (a
+            // bin's squared deviation d^2 - se^2 has variance 2 se^4 + 4 d^2 se^2). The largest
+            // bin has none: one sparse bin at an end of the range, its standard error a few
+            // percent of the force, would leave every log's pass unshown, while its smooth
+            // neighbours hold the curve there.
+            let mut sq_var = 0.0_f64;
             for &(x, f, se) in &points {
                 let target = law.force_n(x);
-                sq += (f - target).powi(2) - se * se;
+                let d = f - target;
+                sq += d * d - se * se;
+                sq_var += 2.0 * se.powi(4) + 4.0 * d * d * se * se;
                 dsq += target * target;
-                max = max.max(((f - target).abs() - 2.0 * se).max(0.0) / target);
+                max = max.max((d.abs() - 2.0 * se).max(0.0) / target);
             }
+            let sq_upper = (sq + 2.0 * sq_var.sqrt()).max(0.0);
             let sq = sq.max(0.0);
             let (rms_what, max_what) = match correction {
                 C::Loading => (
@@ -681,17 +775,19 @@ pub fn stroke_criteria(
                     "largest relative deviation of the mean of the measured loading and unloading quasi-static forces from the law, beyond two of its bin's standard errors",
                 ),
             };
-            let mk = |name, what: &'static str, deviation: f64| Criterion {
+            let mk = |name, what: &'static str, deviation: f64, upper: Option<f64>| Criterion {
                 name,
                 what,
                 deviation_percent: deviation,
                 tolerance_percent: tol,
                 pass: !points.is_empty() && deviation.is_finite() && deviation <= tol,
+                deviation_upper_percent: upper,
             };
+            let rms = |sq: f64| 100.0 * (sq / dsq.max(1e-300)).sqrt();
             (
                 vec![
-                    mk("force_rms", rms_what, 100.0 * (sq / dsq.max(1e-300)).sqrt()),
-                    mk("force_max", max_what, 100.0 * max),
+                    mk("force_rms", rms_what, rms(sq), Some(rms(sq_upper))),
+                    mk("force_max", max_what, 100.0 * max, None),
                 ],
                 Vec::new(),
             )
@@ -752,6 +848,7 @@ pub fn stroke_criteria(
                     deviation_percent: 100.0 * worst,
                     tolerance_percent: 0.0,
                     pass: !d.bins.is_empty() && exits.is_empty(),
+                    deviation_upper_percent: None,
                 }],
                 exits,
             )
@@ -788,6 +885,18 @@ impl BuildExponents {
             0.0
         };
         100.0 * ((k2 - hi).max(lo - k2) - allowance).max(0.0) / self.mean.k2_per_mm
+    }
+
+    /// The upper bound of that deviation: how far `k2` could lie outside the build's
+    /// exponents within two of its standard deviations (percent; infinite without a finite
+    /// standard deviation).
+    pub fn k2_deviation_upper_percent(&self, k2: f64, k2_std: f64) -> f64 {
+        let lo = self.loading_k2_per_mm.min(self.unloading_k2_per_mm);
+        let hi = self.loading_k2_per_mm.max(self.unloading_k2_per_mm);
+        if !k2_std.is_finite() {
+            return f64::INFINITY;
+        }
+        100.0 * ((k2 - hi).max(lo - k2) + 2.0 * k2_std).max(0.0) / self.mean.k2_per_mm
     }
 }
 
@@ -865,4 +974,67 @@ fn exponential_fit(points: &[(f64, f64)], k2_start: f64) -> Option<ExpLaw> {
         k2_per_mm: k,
         f0_n: f0,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn criterion(pass: bool, upper: Option<f64>) -> Criterion {
+        Criterion {
+            name: "k2",
+            what: "",
+            deviation_percent: if pass { 1.0 } else { 4.0 },
+            tolerance_percent: 3.0,
+            pass,
+            deviation_upper_percent: upper,
+        }
+    }
+
+    #[test]
+    fn a_pass_is_shown_only_when_its_upper_bound_is_within_the_tolerance() {
+        assert!(criterion(true, Some(2.9)).shown());
+        assert!(!criterion(true, Some(3.1)).shown());
+        assert!(criterion(true, None).shown());
+        // A failure is beyond the uncertainty already.
+        assert!(criterion(false, Some(9.0)).shown());
+        assert!(conclusive(
+            true,
+            &[criterion(true, Some(2.0)), criterion(true, None)]
+        ));
+        assert!(!conclusive(
+            true,
+            &[criterion(true, Some(2.0)), criterion(true, Some(5.0))]
+        ));
+        assert!(conclusive(
+            false,
+            &[criterion(false, Some(9.0)), criterion(true, Some(5.0))]
+        ));
+        assert_eq!(verdict_word(true, false), "PASS, NOT CONCLUSIVE");
+        assert_eq!(criterion_word(&criterion(true, Some(3.1))), "NOT SHOWN");
+        let notes = not_shown_notes(&[criterion(true, Some(3.1)), criterion(true, Some(2.0))]);
+        assert_eq!(notes.len(), 1);
+        assert!(notes[0].starts_with("k2 is not shown") && notes[0].contains("3.100 %"));
+    }
+
+    #[test]
+    fn k2s_bounds_are_its_distance_from_the_builds_exponents_less_and_plus_two_sigma() {
+        let law = ExpLaw {
+            mu_n: 1.0,
+            k2_per_mm: 0.2,
+            f0_n: 0.0,
+        };
+        let e = BuildExponents {
+            mean: law,
+            loading_k2_per_mm: 0.2,
+            unloading_k2_per_mm: 0.2,
+        };
+        // 0.006 outside, 0.002 standard deviation: (0.006 -+ 0.004) / 0.2.
+        assert!((e.k2_deviation_percent(0.206, 0.002) - 1.0).abs() < 1e-9);
+        assert!((e.k2_deviation_upper_percent(0.206, 0.002) - 5.0).abs() < 1e-9);
+        // Inside the exponents: no deviation; the bound is two standard deviations.
+        assert_eq!(e.k2_deviation_percent(0.2, 0.002), 0.0);
+        assert!((e.k2_deviation_upper_percent(0.2, 0.002) - 2.0).abs() < 1e-9);
+        assert!(e.k2_deviation_upper_percent(0.2, f64::NAN).is_infinite());
+    }
 }
