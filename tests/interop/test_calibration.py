@@ -313,33 +313,6 @@ def test_validate_judges_a_servos_ramp_holds_without_their_transients(tmp_path, 
     assert wrong.returncode == 1, wrong.stdout[-2000:] + wrong.stderr
 
 
-def test_windows_where_the_noise_hides_slow_motion_are_still_compared(tmp_path):
-    """A light transmission (m 0.010, d1 0.06) on trapezoidal moves with the sensors' noise 3.9
-    times the paper's, at 200 Hz. At windows up to 1.2 s the velocity's noise band hides the
-    slow parts of the moves, and fewer than half as many samples counted as moving as at the
-    longest windows: those windows were not compared, and the shortest one left, 1.7 s, rounds
-    the moves' corners. m came out 3.5 of its standard deviations high and the filter, started
-    from it, called itself consistent with M 6.7 of its own off. Samples the noise band hides
-    are left out without bias (the band is decided by a kernel whose noise the regressors do
-    not share); only windows that keep fewer than a quarter as many are not compared now."""
-    tr = Transmission(m=0.010143, d0=0.0, d1=0.059195, d2=0.0, mu=0.972739, k2=0.122319, f0=11.97108)
-    rig = Rig(rate_hz=200.0, seed=36, force_variance=0.06622, position_variance=0.03895)
-    t, f, x, truth = run(tr, rig, "trapezoid", 300.0)
-    log = tmp_path / "noisy.tsv"
-    write_rig_log(log, t, f, x, style="tab")
-    proc = camspring("identify", log, "--json")
-    assert proc.returncode == 0, proc.stderr
-    j = json.loads(proc.stdout)
-    assert j["sg_window_s"] < 1.5, j["window_choice"]
-    assert_every_estimate_within_three_sigma(j, truth)
-    est = camspring("estimate", log, "--json", "-o", tmp_path / "est.csv")
-    e = json.loads(est.stdout)
-    final = e["final"]
-    if e["consistency"]["consistent"]:
-        assert abs(final["m_n_s2_per_mm"] - tr.m) < 3.0 * final["m_n_s2_per_mm_std"], final
-        assert abs(final["k2_per_mm"] - tr.k2) < 3.0 * final["k2_per_mm_std"], final
-
-
 def validate_json(tmp_path, tr, log, k2_scale):
     proc = camspring("validate", spec(tmp_path / f"s{k2_scale}.toml", tr, k2_scale), log, "--tolerance", "3%", "--json")
     return proc.returncode, json.loads(proc.stdout)
@@ -370,3 +343,52 @@ def test_a_pass_the_log_cannot_show_is_said_to_be_not_conclusive(tmp_path):
     assert text.startswith("PASS, NOT CONCLUSIVE") and "not conclusive: k2 is not shown" in text, text
     rc, far = validate_json(tmp_path, tr, log, 1.12)
     assert rc == 1 and not far["pass"], far["criteria"]
+
+
+@pytest.mark.xfail(strict=True, reason="the diagnosis smears a heavily damped servo's velocity steps")
+def test_validate_passes_a_light_heavily_damped_transmission_on_a_servos_ramp_holds(tmp_path):
+    """Known to fail (strict, so that a fix shows up). m 0.0066, d1 1.49 N s/mm, ramps at 0.5
+    to 2 mm/s from a servo: the damper force steps by up to 3 N at every start and stop. The
+    diagnosis compares its windows by a reduced chi-square that weights each sample with the
+    force and position noise only, so at short windows the velocity's noise through d1 makes
+    every fit look misfitted (36 at 0.2 s); it chooses 1.6 s, which smears the steps, and the
+    binned curve's first loading bin, a ramp's start, stands 5.6 % (beyond two standard
+    errors) above the true law: FAIL. Comparing the windows with each sample's full variance
+    passes this log, but chose shorter windows on the paper's Table I trapezoidal moves, where
+    the diagnosis's fit (no errors-in-variables correction) then failed the true law on
+    force_rms (4.1 %); not kept (docs/CALIBRATION.md, "Diagnosis and revision")."""
+    tr = Transmission(m=0.006625, d0=0.0, d1=1.48805, d2=0.0, mu=1.76792, k2=0.153752, f0=1.50775)
+    t, f, x, _ = run(tr, Rig(seed=19, force_variance=0.01747, position_variance=0.01028), "servo", 300.0)
+    log = tmp_path / "servo.tsv"
+    write_rig_log(log, t, f, x, style="tab")
+    rc, right = validate_json(tmp_path, tr, log, 1.0)
+    assert rc == 0 and right["pass"], right["criteria"]
+    rc, wrong = validate_json(tmp_path, tr, log, 1.05)
+    assert rc == 1 and not wrong["pass"], wrong["criteria"]
+
+
+def test_windows_where_the_noise_hides_slow_motion_are_still_compared(tmp_path):
+    """A light transmission (m 0.010, d1 0.06) on trapezoidal moves with the sensors' noise 3.9
+    times the paper's, at 200 Hz. At windows up to 1.2 s the velocity's noise band hides the
+    slow parts of the moves, and fewer than half as many samples counted as moving as at the
+    longest windows: those windows were not compared, and the shortest one left, 1.7 s, rounds
+    the moves' corners. m came out 3.5 of its standard deviations high and the filter, started
+    from it, called itself consistent with M 6.7 of its own off. Samples the noise band hides
+    are left out without bias (the band is decided by a kernel whose noise the regressors do
+    not share); only windows that keep fewer than a quarter as many are not compared now."""
+    tr = Transmission(m=0.010143, d0=0.0, d1=0.059195, d2=0.0, mu=0.972739, k2=0.122319, f0=11.97108)
+    rig = Rig(rate_hz=200.0, seed=36, force_variance=0.06622, position_variance=0.03895)
+    t, f, x, truth = run(tr, rig, "trapezoid", 300.0)
+    log = tmp_path / "noisy.tsv"
+    write_rig_log(log, t, f, x, style="tab")
+    proc = camspring("identify", log, "--json")
+    assert proc.returncode == 0, proc.stderr
+    j = json.loads(proc.stdout)
+    assert j["sg_window_s"] < 1.5, j["window_choice"]
+    assert_every_estimate_within_three_sigma(j, truth)
+    est = camspring("estimate", log, "--json", "-o", tmp_path / "est.csv")
+    e = json.loads(est.stdout)
+    final = e["final"]
+    if e["consistency"]["consistent"]:
+        assert abs(final["m_n_s2_per_mm"] - tr.m) < 3.0 * final["m_n_s2_per_mm_std"], final
+        assert abs(final["k2_per_mm"] - tr.k2) < 3.0 * final["k2_per_mm_std"], final
