@@ -883,7 +883,9 @@ pub fn run_validate(
                     Some(e.k2_deviation_upper_percent(judged_k2, judged_k2_std));
                 c.pass =
                     c.deviation_percent.is_finite() && c.deviation_percent <= c.tolerance_percent;
-                c.what = if consistent {
+                c.what = if !crate::estimate::identify::k2_resolved(judged_k2, judged_k2_std) {
+                    "exponent rate k2: not resolved by this log (its standard deviation exceeds half its value, or it is not positive), so not judged"
+                } else if consistent {
                     "EKF exponent rate k2 beyond the exponents of the designed build's loading and unloading curves and two of its standard deviations"
                 } else {
                     "identified exponent rate k2 beyond the exponents of the designed build's loading and unloading curves and two of its standard deviations (the EKF was not consistent on this log)"

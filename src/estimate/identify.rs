@@ -298,6 +298,21 @@ pub struct Identification {
     pub reduced_chi2_noise_change: f64,
 }
 
+/// Share of its value beyond which a k2's standard deviation no longer bounds it.
+pub const K2_RESOLVED_SHARE: f64 = 0.5;
+
+/// Whether a log resolves k2: positive, with a standard deviation at most
+/// [`K2_RESOLVED_SHARE`] of it (a k2 without a standard deviation is judged as it is). Where the
+/// log hardly fixes the spring's curvature, the fit's linearised deviation no longer bounds
+/// the estimate: on the independent rig's multisine of a heavy transmission (m 0.46 N s^2/mm)
+/// at four times the paper's noise, identification found k2 = -0.008 +- 0.028 /mm against
+/// 0.163 (z -6.2), and validate failed the true law on it (k2 71 % beyond two of those
+/// deviations) while the force curve passed. identify warns of an unresolved k2, and validate
+/// does not judge it: it cannot fail, and the pass is not shown.
+pub fn k2_resolved(k2: f64, k2_std: f64) -> bool {
+    !k2_std.is_finite() || (k2 > 0.0 && k2_std <= K2_RESOLVED_SHARE * k2)
+}
+
 /// The precision the calibration of a spring law aims at: k2 within 0.5 % and mu within
 /// 1.5 %, each at two standard deviations (95 %).
 pub const TARGET_PRECISION: [(Param, f64); 2] = [(Param::K2, 0.005), (Param::Mu, 0.015)];

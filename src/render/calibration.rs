@@ -325,6 +325,18 @@ pub fn format_identification(id: &Identification, noise: &ResolvedNoise) -> Stri
          quasi-static samples alone {:.5} 1/mm",
         id.residual_rms_n, id.reduced_chi2, id.condition_number, id.k2_quasi_static_per_mm
     );
+    let k2 = id.get(Param::K2);
+    if let (Some(v), Some(sd)) = (k2.value, k2.std) {
+        if !crate::estimate::identify::k2_resolved(v, sd) {
+            let _ = writeln!(
+                s,
+                "warning: this log does not resolve the spring's curvature (k2 = {v:.5} +- {sd:.5} \
+                 1/mm): its standard deviation does not bound it, and mu, F0 and k2 trade off. \
+                 Record a run over more of the stroke, slower (less inertia force against the \
+                 spring's) or with less sensor noise"
+            );
+        }
+    }
     for (p, rel, longer) in id.imprecise() {
         let _ = writeln!(
             s,
@@ -763,7 +775,11 @@ fn criteria_lines(criteria: &[crate::verdict::validate::Criterion]) -> String {
                 c.name,
                 c.deviation_percent,
                 c.deviation_upper_percent
-                    .map_or(String::new(), |u| format!("up to {u:.3} %; ")),
+                    .map_or(String::new(), |u| if u.is_finite() {
+                        format!("up to {u:.3} %; ")
+                    } else {
+                        "unbounded; ".to_string()
+                    }),
                 c.tolerance_percent,
                 c.what
             )

@@ -403,7 +403,11 @@ fn criteria_rows(h: &mut String, criteria: &[crate::verdict::validate::Criterion
             escape(c.name),
             c.deviation_percent,
             c.deviation_upper_percent
-                .map_or("&ndash;".to_string(), |u| format!("{u:.3} %")),
+                .map_or("&ndash;".to_string(), |u| if u.is_finite() {
+                    format!("{u:.3} %")
+                } else {
+                    "unbounded".to_string()
+                }),
             c.tolerance_percent,
             escape(c.what)
         );

@@ -22,7 +22,7 @@ use serde::Serialize;
 
 use crate::cam::tolerance::ForceBand;
 use crate::estimate::ekf::{idx, State};
-use crate::estimate::identify::{Identification, Param, SensorNoise};
+use crate::estimate::identify::{k2_resolved, Identification, Param, SensorNoise};
 use crate::estimate::log::CalibrationLog;
 use crate::estimate::pipeline::EstimateRun;
 use crate::estimate::sg;
@@ -99,12 +99,20 @@ pub fn not_shown_notes(criteria: &[Criterion]) -> Vec<String> {
                 }
                 _ => "more passes over the stroke, or a longer log, narrow the bins' standard errors",
             };
-            format!(
-                "{} is not shown within its tolerance: within two standard deviations of this \
-                 log's uncertainty it could be {upper:.3} % against {:.3} %, so a build that \
-                 misses the tolerance could have passed; {narrows}",
-                c.name, c.tolerance_percent
-            )
+            if upper.is_finite() {
+                format!(
+                    "{} is not shown within its tolerance: within two standard deviations of \
+                     this log's uncertainty it could be {upper:.3} % against {:.3} %, so a build \
+                     that misses the tolerance could have passed; {narrows}",
+                    c.name, c.tolerance_percent
+                )
+            } else {
+                format!(
+                    "{} is not resolved by this log, so it is not judged: a build that misses \
+                     the tolerance could have passed; {narrows}",
+                    c.name
+                )
+            }
         })
         .collect()
 }
@@ -360,7 +368,11 @@ pub fn validate_with(
         }
     }
     if let Some(c) = criteria.iter_mut().find(|c| c.name == "k2") {
-        c.deviation_upper_percent = Some(if k2_std.is_finite() {
+        if !k2_resolved(k2, k2_std) {
+            c.deviation_percent = 0.0;
+            c.pass = true;
+        }
+        c.deviation_upper_percent = Some(if k2_std.is_finite() && k2_resolved(k2, k2_std) {
             100.0 * ((k2 - designed.k2_per_mm).abs() + 2.0 * k2_std) / designed.k2_per_mm
         } else {
             f64::INFINITY
@@ -877,6 +889,9 @@ impl BuildExponents {
     /// by its error against its uncertainty (an EKF's is tiny; identification's grows where
     /// its constant Coulomb term cannot follow a friction that scales with the force).
     pub fn k2_deviation_percent(&self, k2: f64, k2_std: f64) -> f64 {
+        if !k2_resolved(k2, k2_std) {
+            return 0.0;
+        }
         let lo = self.loading_k2_per_mm.min(self.unloading_k2_per_mm);
         let hi = self.loading_k2_per_mm.max(self.unloading_k2_per_mm);
         let allowance = if k2_std.is_finite() {
@@ -889,11 +904,11 @@ impl BuildExponents {
 
     /// The upper bound of that deviation: how far `k2` could lie outside the build's
     /// exponents within two of its standard deviations (percent; infinite without a finite
-    /// standard deviation).
+    /// standard deviation, or where the log does not resolve k2).
     pub fn k2_deviation_upper_percent(&self, k2: f64, k2_std: f64) -> f64 {
         let lo = self.loading_k2_per_mm.min(self.unloading_k2_per_mm);
         let hi = self.loading_k2_per_mm.max(self.unloading_k2_per_mm);
-        if !k2_std.is_finite() {
+        if !k2_std.is_finite() || !k2_resolved(k2, k2_std) {
             return f64::INFINITY;
         }
         100.0 * ((k2 - hi).max(lo - k2) + 2.0 * k2_std).max(0.0) / self.mean.k2_per_mm
@@ -1036,5 +1051,10 @@ mod tests {
         assert_eq!(e.k2_deviation_percent(0.2, 0.002), 0.0);
         assert!((e.k2_deviation_upper_percent(0.2, 0.002) - 2.0).abs() < 1e-9);
         assert!(e.k2_deviation_upper_percent(0.2, f64::NAN).is_infinite());
+        // Not resolved (deviation above half the value, or k2 not positive): not judged.
+        assert!(k2_resolved(0.2, 0.1) && !k2_resolved(0.2, 0.11) && !k2_resolved(-0.008, 0.0277));
+        assert_eq!(e.k2_deviation_percent(-0.008, 0.0277), 0.0);
+        assert!(e.k2_deviation_upper_percent(-0.008, 0.0277).is_infinite());
+        assert_eq!(e.k2_deviation_percent(0.3, 0.16), 0.0);
     }
 }

@@ -392,3 +392,24 @@ def test_windows_where_the_noise_hides_slow_motion_are_still_compared(tmp_path):
     if e["consistency"]["consistent"]:
         assert abs(final["m_n_s2_per_mm"] - tr.m) < 3.0 * final["m_n_s2_per_mm_std"], final
         assert abs(final["k2_per_mm"] - tr.k2) < 3.0 * final["k2_per_mm_std"], final
+
+
+def test_a_spring_the_log_does_not_resolve_is_said_so_and_not_judged(tmp_path):
+    """A heavy transmission (m 0.46 N s^2/mm) on fast sines at four times the paper's noise,
+    a spring whose exponential part is small against its preload (mu 0.59 N, F0 14.9 N): the
+    inertia's noise buries the spring's curvature, and identification found k2 = -0.008 +- 0.028
+    /mm against 0.163 (z -6.2; 'poorly resolved'). validate failed the true law on that k2 (71 %
+    beyond two of those deviations) while the binned force curve passed. identify now warns that
+    the log does not resolve the spring's curvature, and validate does not judge such a k2: the
+    force curve decides, and the pass is not shown."""
+    tr = Transmission(m=0.459, d0=0.3473, d1=0.30791, d2=-0.00050775, mu=0.593818, k2=0.163483, f0=14.88424)
+    rig = Rig(rate_hz=500.0, seed=60, force_variance=0.066309, position_variance=0.039005)
+    t, f, x, _ = run(tr, rig, "multisine", 300.0)
+    log = tmp_path / "buried.tsv"
+    write_rig_log(log, t, f, x, style="tab")
+    ident = camspring("identify", log)
+    assert "does not resolve the spring's curvature" in ident.stdout, ident.stdout
+    rc, right = validate_json(tmp_path, tr, log, 1.0)
+    k2 = next(c for c in right["criteria"] if c["name"] == "k2")
+    assert k2["pass"] and "not resolved" in k2["what"], k2
+    assert rc == 0 and right["pass"] and not right["conclusive"], right["criteria"]
