@@ -1225,10 +1225,11 @@ pub(super) fn fit_model(
         not_identifiable.extend(dropped);
         Ok((rows, p, active, not_identifiable, paper_covariance_k2_fixed))
     };
+    let fit_m = inertia == Inertia::Fitted;
     let mut excluded = vec![false; n];
     let mut band = band;
     let (mut rows, mut p, mut active, mut not_identifiable, mut paper_covariance_k2_fixed) =
-        dynamic_fit(band, &excluded, inertia == Inertia::Fitted)?;
+        dynamic_fit(band, &excluded, fit_m)?;
     // A wrong friction sign costs a residual of 2 d0. Samples within a few velocity-noise
     // standard deviations of zero can have it; with strong Coulomb friction the band is widened
     // until the expected share of such rows, times (2 d0)^2, is below 1 % of the row variance.
@@ -1245,7 +1246,7 @@ pub(super) fn fit_model(
         if wider > band {
             band = wider;
             (rows, p, active, not_identifiable, paper_covariance_k2_fixed) =
-                dynamic_fit(band, &excluded, inertia == Inertia::Fitted)?;
+                dynamic_fit(band, &excluded, fit_m)?;
         }
     }
     // Transients the window cannot resolve: where the motion changes within a window (a
@@ -1299,7 +1300,7 @@ pub(super) fn fit_model(
         {
             break;
         }
-        let Ok(refit) = dynamic_fit(band, &next, inertia == Inertia::Fitted) else {
+        let Ok(refit) = dynamic_fit(band, &next, fit_m) else {
             break;
         };
         excluded = next;
