@@ -378,9 +378,10 @@ pub fn validate_with(
             f64::INFINITY
         });
     }
+    let pass = criteria.iter().all(|c| c.pass);
     Validation {
-        pass: criteria.iter().all(|c| c.pass),
-        conclusive: true,
+        pass,
+        conclusive: conclusive(pass, &criteria),
         criteria,
         designed: *designed,
         exponents: None,
@@ -588,9 +589,10 @@ pub fn validate_curve(
             (criteria, Vec::new())
         }
     };
+    let pass = !bins.is_empty() && criteria.iter().all(|c: &Criterion| c.pass);
     CurveValidation {
-        pass: !bins.is_empty() && criteria.iter().all(|c: &Criterion| c.pass),
-        conclusive: true,
+        pass,
+        conclusive: conclusive(pass, &criteria),
         criteria,
         removed_m_n_s2_per_mm: m,
         removed_d0_n: d0,
