@@ -190,14 +190,19 @@ def test_an_inertia_disagreement_names_identifications_lean_when_the_filter_is_t
     assert (ident["m_n_s2_per_mm"] - truth["m"]) / ident["m_n_s2_per_mm_std"] > 2.5, ident
 
 
-def identified_rig_log(path, row, rig, profile):
-    """A 300 s log of the rig's `row` transmission, written with tabs, and `identify --json`
-    of it (which must succeed)."""
-    t, f, x, truth = run(MATRIX_ROWS[row], rig, profile, 300.0)
+def identified_log(path, tr, rig, profile):
+    """A 300 s log of transmission `tr`, written with tabs, and `identify --json` of it (which
+    must succeed)."""
+    t, f, x, truth = run(tr, rig, profile, 300.0)
     write_rig_log(path, t, f, x, style="tab")
     proc = camspring("identify", path, "--json")
     assert proc.returncode == 0, proc.stderr
     return path, json.loads(proc.stdout), truth
+
+
+def identified_rig_log(path, row, rig, profile):
+    """`identified_log` of the rig's `row` transmission."""
+    return identified_log(path, MATRIX_ROWS[row], rig, profile)
 
 
 def assert_every_estimate_within_three_sigma(j, truth):
@@ -378,12 +383,7 @@ def test_windows_where_the_noise_hides_slow_motion_are_still_compared(tmp_path):
     not share); only windows that keep fewer than a quarter as many are not compared now."""
     tr = Transmission(m=0.010143, d0=0.0, d1=0.059195, d2=0.0, mu=0.972739, k2=0.122319, f0=11.97108)
     rig = Rig(rate_hz=200.0, seed=36, force_variance=0.06622, position_variance=0.03895)
-    t, f, x, truth = run(tr, rig, "trapezoid", 300.0)
-    log = tmp_path / "noisy.tsv"
-    write_rig_log(log, t, f, x, style="tab")
-    proc = camspring("identify", log, "--json")
-    assert proc.returncode == 0, proc.stderr
-    j = json.loads(proc.stdout)
+    log, j, truth = identified_log(tmp_path / "noisy.tsv", tr, rig, "trapezoid")
     assert j["sg_window_s"] < 1.5, j["window_choice"]
     assert_every_estimate_within_three_sigma(j, truth)
     est = camspring("estimate", log, "--json", "-o", tmp_path / "est.csv")
@@ -422,11 +422,6 @@ def test_an_inertia_whose_signal_went_with_the_transients_is_given_up(tmp_path):
     0.36 (z -5.7). Where less than three quarters of the signal stays, m is given up."""
     tr = Transmission(m=0.362433, d0=3.730319, d1=0.182282, d2=-0.004761, mu=1.345191, k2=0.191880, f0=8.295778)
     rig = Rig(rate_hz=500.0, seed=79, force_variance=0.032664, position_variance=0.019214)
-    t, f, x, truth = run(tr, rig, "servo", 300.0)
-    log = tmp_path / "servo.tsv"
-    write_rig_log(log, t, f, x, style="tab")
-    proc = camspring("identify", log, "--json")
-    assert proc.returncode == 0, proc.stderr
-    j = json.loads(proc.stdout)
+    _, j, truth = identified_log(tmp_path / "servo.tsv", tr, rig, "servo")
     assert j["transient_samples"] > 0, j["transient_samples"]
     assert_every_estimate_within_three_sigma(j, truth)
