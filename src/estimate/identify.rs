@@ -518,7 +518,7 @@ fn masked(mut row: V7, active: &Active) -> V7 {
 }
 
 /// An unbiased estimate of v^3 from a noisy o = v + e with var(e) = s2: o^3 - 3 o s2.
-fn unbiased_cube(o: f64, s2: f64) -> f64 {
+pub(crate) fn unbiased_cube(o: f64, s2: f64) -> f64 {
     o * o * o - 3.0 * o * s2
 }
 
