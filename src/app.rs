@@ -827,11 +827,14 @@ pub fn run_validate(
     };
     let (verdict, svg_text, html) = match &designed {
         ForceLaw::Exponential(law) => {
-            // A filter that diverges, or is not consistent on this log, does not judge:
-            // identification does.
+            // A filter that diverges, is not run (identification does not resolve the
+            // spring), or is not consistent on this log, does not judge: identification does.
+            use crate::estimate::pipeline::EstimateError;
             let est = match estimate_log(&log, opts, true) {
                 Ok(est) => Some(est),
-                Err(Error::Estimate(crate::estimate::pipeline::EstimateError::Filter(e))) => {
+                Err(Error::Estimate(
+                    e @ (EstimateError::Filter(_) | EstimateError::SpringNotResolved { .. }),
+                )) => {
                     eprintln!("warning: {e}; k2 is judged from identification");
                     None
                 }

@@ -206,6 +206,24 @@ pub enum EstimateError {
     /// Produced by [`estimate`] when the filter diverges or the log is too short for it.
     #[error("estimate: {0}")]
     Filter(#[from] EkfError),
+    /// Produced by [`estimate`] when identification, the filter's start, does not resolve the
+    /// spring's curvature ([`super::identify::k2_resolved`]): a filter started from a k2 whose
+    /// standard deviation exceeds half its value has no spring to converge to. On an
+    /// independent rig's force-controlled log whose rod stuck most of the time (763 of 30 000
+    /// samples moving, k2 = 2.19 +- 8.1 /mm against 0.114) it diverged at 24 s, and three
+    /// recoveries diverged too.
+    #[error(
+        "estimate: identification does not resolve the spring's curvature on this log (k2 = \
+         {k2_per_mm:.5} +- {k2_std:.5} 1/mm), so the filter has nothing to start from and is not \
+         run; record a run over more of the stroke, slower, or with less sensor noise (identify \
+         says what the log lacks)"
+    )]
+    SpringNotResolved {
+        /// Identification's k2 (1/mm).
+        k2_per_mm: f64,
+        /// Its standard deviation (1/mm).
+        k2_std: f64,
+    },
     /// Produced by [`estimate`] for [`PositionOffset::Auto`] without a law to fit against.
     #[error(
         "--position-offset auto fits the encoder zero against a designed law: use it with \
@@ -785,6 +803,12 @@ where
     let (mut init, identification, stroke) = match &opts.init {
         EstimateInit::Identify => {
             let id = identify_reduced(reduced, noise, opts.window_s)?;
+            let k2 = id.get(super::identify::Param::K2);
+            if let (Some(k2_per_mm), Some(k2_std)) = (k2.value, k2.std) {
+                if !super::identify::k2_resolved(k2_per_mm, k2_std) {
+                    return Err(EstimateError::SpringNotResolved { k2_per_mm, k2_std });
+                }
+            }
             let stroke = (lo - offset_mm).abs().max((hi - offset_mm).abs());
             (
                 EkfInit::from_identification(&id, noise.force_variance_n2),

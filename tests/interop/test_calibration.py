@@ -459,3 +459,21 @@ def test_one_bin_of_many_beyond_two_standard_errors_does_not_fail_the_true_law(t
     assert rc == 0 and right["pass"], right["criteria"]
     rc, wrong = validate_json(tmp_path, tr, log, 1.05)
     assert rc == 1 and not wrong["pass"], wrong["criteria"]
+
+
+def test_a_spring_identification_does_not_resolve_gets_no_filter_and_no_force_verdict_at_zero(tmp_path):
+    """Sweep draw 103: a force-controlled rod that sticks most of the time (friction 3 N,
+    763 of 30 000 samples moving, 10.7 to 14.7 mm of a 15 mm stroke). Identification fits
+    (reduced chi-square 1.03) but resolves nothing of the spring (k2 2.2 +- 8.1 /mm against
+    0.114). The filter, started there, diverged at 24 s, and so did its three recoveries; now
+    estimate says why it does not run (exit 2). validate failed force_rms and force_max "at
+    0.000 %" (no bin on the corrected stroke); they are now not judged, and the verdict fails
+    on coverage alone (69 % of the stroke unlogged)."""
+    tr, log = sweep_log(tmp_path, 103)
+    est = camspring("estimate", log, "-o", tmp_path / "est.csv")
+    assert est.returncode == 2, est.stderr
+    assert "does not resolve the spring's curvature" in est.stderr, est.stderr
+    rc, right = validate_json(tmp_path, tr, log, 1.0)
+    assert rc == 1 and not right["pass"], right["criteria"]
+    failed = [c["name"] for c in right["criteria"] if not c["pass"]]
+    assert failed == ["coverage"], right["criteria"]
