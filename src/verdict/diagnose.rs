@@ -30,6 +30,7 @@ use serde::Serialize;
 
 use crate::cam::tolerance::{build_curves, build_force_at, Build};
 use crate::design::Design;
+use crate::estimate::adequacy::{MAX_REDUCED_CHI2, MIN_REDUCED_CHI2};
 use crate::estimate::identify::{
     mark_window, unbiased_cube, SensorNoise, CHI2_RISE_MIN, TRANSIENT_ROUNDS, TRANSIENT_SIGMAS,
 };
@@ -37,7 +38,6 @@ use crate::estimate::log::CalibrationLog;
 use crate::estimate::pipeline::PositionOffset;
 use crate::estimate::sg;
 use crate::estimate::sim::BuiltSpring;
-use crate::estimate::adequacy::{MAX_REDUCED_CHI2, MIN_REDUCED_CHI2};
 use crate::estimate::window::MIN_SIGNAL_SHARE;
 use crate::model::{Follower, ForceLaw, TableLaw};
 use rayon::prelude::*;
