@@ -791,19 +791,25 @@ pub fn stroke_criteria(
                 dsq += target * target;
                 max = max.max((d.abs() - z * se).max(0.0) / target);
             }
+            // The RMS fails only where its lower bound (two standard deviations below) is beyond
+            // the tolerance, as a failure is one the log shows ([`Criterion::shown`]), and as
+            // force_max allows each bin its standard errors. Judged on the estimate itself, the
+            // true law of sweep draw 78 (a soft spring, friction half its force, bins' standard
+            // errors 10 to 25 % at the soft end) failed at 3.02 % with an upper bound of 5.6 %.
             let sq_upper = (sq + 2.0 * sq_var.sqrt()).max(0.0);
+            let sq_lower = (sq - 2.0 * sq_var.sqrt()).max(0.0);
             let sq = sq.max(0.0);
             let (rms_what, max_what) = match correction {
                 C::Loading => (
-                    "RMS of the measured quasi-static force on the corrected stroke (loading) against the law over the measured range, beyond the bins' standard errors",
+                    "RMS of the measured quasi-static force on the corrected stroke (loading) against the law over the measured range, beyond the bins' standard errors; fails where even its lower bound exceeds the tolerance",
                     "largest relative deviation of the measured quasi-static force on the corrected stroke (loading) from the law, beyond its bin's standard error times the bins' multiple-comparison factor (a 5 % chance that any bin of the true law exceeds it)",
                 ),
                 C::Unloading => (
-                    "RMS of the measured quasi-static force on the corrected stroke (unloading) against the law over the measured range, beyond the bins' standard errors",
+                    "RMS of the measured quasi-static force on the corrected stroke (unloading) against the law over the measured range, beyond the bins' standard errors; fails where even its lower bound exceeds the tolerance",
                     "largest relative deviation of the measured quasi-static force on the corrected stroke (unloading) from the law, beyond its bin's standard error times the bins' multiple-comparison factor (a 5 % chance that any bin of the true law exceeds it)",
                 ),
                 C::Midline | C::None => (
-                    "RMS of the mean of the measured loading and unloading quasi-static forces against the law over the measured range, beyond the bins' standard errors",
+                    "RMS of the mean of the measured loading and unloading quasi-static forces against the law over the measured range, beyond the bins' standard errors; fails where even its lower bound exceeds the tolerance",
                     "largest relative deviation of the mean of the measured loading and unloading quasi-static forces from the law, beyond its bin's standard error times the bins' multiple-comparison factor (a 5 % chance that any bin of the true law exceeds it)",
                 ),
             };
@@ -811,19 +817,30 @@ pub fn stroke_criteria(
             // most of the time, its rests left out for their friction) says nothing of the
             // force there: not judged, rather than failed at 0 %.
             let judged = !points.is_empty();
-            let mk = |name, what: &'static str, deviation: f64, upper: Option<f64>| Criterion {
+            // `judged`: the deviation the pass is decided on.
+            let mk = |name,
+                      what: &'static str,
+                      deviation: f64,
+                      judged_deviation: f64,
+                      upper: Option<f64>| Criterion {
                 name,
                 what,
                 deviation_percent: deviation,
                 tolerance_percent: tol,
-                pass: !judged || (deviation.is_finite() && deviation <= tol),
+                pass: !judged || (judged_deviation.is_finite() && judged_deviation <= tol),
                 deviation_upper_percent: if judged { upper } else { Some(f64::INFINITY) },
             };
             let rms = |sq: f64| 100.0 * (sq / dsq.max(1e-300)).sqrt();
             (
                 vec![
-                    mk("force_rms", rms_what, rms(sq), Some(rms(sq_upper))),
-                    mk("force_max", max_what, 100.0 * max, None),
+                    mk(
+                        "force_rms",
+                        rms_what,
+                        rms(sq),
+                        rms(sq_lower),
+                        Some(rms(sq_upper)),
+                    ),
+                    mk("force_max", max_what, 100.0 * max, 100.0 * max, None),
                 ],
                 Vec::new(),
             )
