@@ -26,7 +26,7 @@ DROPPED_ROW = 1234
 
 
 def rig_log(tmp_path, row, profile, seed=0, duration_s=300.0):
-    tr = ROWS[row]
+    tr = MATRIX_ROWS[row]
     t, f, x, truth = run(tr, Rig(seed=seed), profile, duration_s)
     path = tmp_path / f"{row}-{profile}.tsv"
     write_rig_log(path, t, f, x, style="tab", drop=[DROPPED_ROW])
@@ -494,9 +494,7 @@ def test_the_diagnosis_damper_is_not_pulled_along_its_line_by_the_velocitys_nois
     every window from 0.81 to 1.61 s passes it, and the window kept has d2 within 0.03 of the
     truth."""
     tr = MATRIX_ROWS["issue"]
-    t, f, x, _ = run(tr, Rig(seed=1), "scurve", 300.0)
-    log = tmp_path / "issue-scurve-1.tsv"
-    write_rig_log(log, t, f, x, style="tab", drop=[DROPPED_ROW])
+    log, _ = rig_log(tmp_path, "issue", "scurve", seed=1)
     rc, right = validate_json(tmp_path, tr, log, 1.0)
     assert rc == 0 and right["pass"], right["criteria"]
     d = right["diagnosis"]
@@ -518,9 +516,7 @@ def test_a_bins_standard_error_holds_the_uncertainty_of_the_dynamics_taken_out(t
     (force_max 5.4 %). The bins' standard errors now add the fitted dynamics' covariance
     through the bin's mean regressors; the true law passes and k2 5 % high fails."""
     tr = MATRIX_ROWS["heavy"]
-    t, f, x, _ = run(tr, Rig(seed=1), "trapezoid", 300.0)
-    log = tmp_path / "heavy-trapezoid-1.tsv"
-    write_rig_log(log, t, f, x, style="tab", drop=[DROPPED_ROW])
+    log, _ = rig_log(tmp_path, "heavy", "trapezoid", seed=1)
     rc, right = validate_json(tmp_path, tr, log, 1.0)
     assert rc == 0 and right["pass"], right["criteria"]
     rc, wrong = validate_json(tmp_path, tr, log, 1.05)
