@@ -40,9 +40,19 @@ pub struct RodForce {
 /// Rod force from geometry: q*tan(theta + phi) (loading) and q*tan(theta - phi) (unloading).
 /// Returns `None` for loading where theta + phi >= 90 deg.
 pub fn rod_force(q_n: f64, theta_rad: f64, phi_rad: f64) -> (Option<f64>, f64) {
+    (
+        stroke_rod_force(q_n, theta_rad, phi_rad, true),
+        q_n * (theta_rad - phi_rad).tan(),
+    )
+}
+
+/// The rod force of [`rod_force`] on one stroke only (`loading`), for callers that need one.
+pub fn stroke_rod_force(q_n: f64, theta_rad: f64, phi_rad: f64, loading: bool) -> Option<f64> {
+    if !loading {
+        return Some(q_n * (theta_rad - phi_rad).tan());
+    }
     let load_angle = theta_rad + phi_rad;
-    let loading = (load_angle < std::f64::consts::FRAC_PI_2).then(|| q_n * load_angle.tan());
-    (loading, q_n * (theta_rad - phi_rad).tan())
+    (load_angle < std::f64::consts::FRAC_PI_2).then(|| q_n * load_angle.tan())
 }
 
 /// Plane-strain contact modulus E* from both materials: 1/E* = sum (1 - nu^2)/E.

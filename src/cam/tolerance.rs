@@ -81,12 +81,23 @@ pub fn build_force(
     i: usize,
 ) -> (Option<f64>, f64) {
     let s = &pitch.samples[i];
-    let (theta, cos) = (s.theta_rad, s.theta_rad.cos().max(1e-9));
-    let y = s.y_mm + (build.roller_mm + build.profile_mm) / cos;
-    let q = follower.k_eff_n_per_mm()
+    let q = spring_load_n(follower, build, s.y_mm, s.theta_rad);
+    super::forces::rod_force(q, s.theta_rad, build.friction.atan())
+}
+
+/// The build's spring load q (N) where the made cam's pitch curve has lift `y_mm` and pressure
+/// angle `theta_rad`: the springs' rate times their compression, the pitch lift moved out by
+/// the roller's and the profile's error along the normal.
+pub fn spring_load_n(follower: &Follower, build: &Build, y_mm: f64, theta_rad: f64) -> f64 {
+    let offset = build.roller_mm + build.profile_mm;
+    let y = if offset == 0.0 {
+        y_mm
+    } else {
+        y_mm + offset / theta_rad.cos().max(1e-9)
+    };
+    follower.k_eff_n_per_mm()
         * (1.0 + build.rate)
-        * (y + follower.preload_mm + build.preload_mm).max(0.0);
-    super::forces::rod_force(q, theta, build.friction.atan())
+        * (y + follower.preload_mm + build.preload_mm).max(0.0)
 }
 
 /// Follower lift Y and pressure angle theta at any deflection: a cubic Hermite through the
@@ -138,11 +149,7 @@ pub fn build_force_at(
     x_mm: f64,
 ) -> (Option<f64>, f64) {
     let (y, theta) = pitch_at(pitch, x_mm);
-    let cos = theta.cos().max(1e-9);
-    let y = y + (build.roller_mm + build.profile_mm) / cos;
-    let q = follower.k_eff_n_per_mm()
-        * (1.0 + build.rate)
-        * (y + follower.preload_mm + build.preload_mm).max(0.0);
+    let q = spring_load_n(follower, build, y, theta);
     super::forces::rod_force(q, theta, build.friction.atan())
 }
 

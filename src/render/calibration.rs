@@ -1105,7 +1105,7 @@ pub fn format_diagnosis(d: &crate::verdict::diagnose::Diagnosis) -> String {
     );
     let _ = writeln!(
         s,
-        "fit: {} samples, window {:.2} s (smallest reduced chi-square of {} tried), reduced chi-square {:.2}",
+        "fit: {} samples, window {:.2} s (by the window rule, of {} tried), reduced chi-square {:.2}",
         d.samples,
         d.sg_window_s,
         d.windows_tried.len(),

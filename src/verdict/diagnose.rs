@@ -30,7 +30,8 @@
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 
-use crate::cam::tolerance::{build_curves, build_force_at, Build};
+use crate::cam::forces::stroke_rod_force;
+use crate::cam::tolerance::{build_curves, build_force_at, pitch_at, spring_load_n, Build};
 use crate::design::Design;
 use crate::estimate::adequacy::{MAX_REDUCED_CHI2, MIN_REDUCED_CHI2};
 use crate::estimate::identify::{
@@ -273,7 +274,11 @@ pub struct Diagnosis {
     pub friction: Fitted,
     /// Encoder zero (mm): the log reads the deflection plus this.
     pub zero_offset_mm: Fitted,
-    /// Inertia taken out (N s^2/mm).
+    /// Inertia taken out (N s^2/mm). The inertia and the damper are what the binned curve
+    /// takes out, not measurements of the transmission (identify and estimate give those,
+    /// with their deviations): at the long windows a smooth log allows, m takes up the
+    /// smoothing's loss of acceleration (0.26 against 0.25, 10 to 17 of its own standard
+    /// deviations, on the matrix's multisines), so none is given for them here.
     pub m_n_s2_per_mm: f64,
     /// Coulomb friction outside the cam (guides, seals), taken out (N), with its std.
     pub d0_n: [f64; 2],
@@ -417,21 +422,49 @@ impl Samples {
     /// noise-free log; with it, 1.40 +- 0.10 and 0.009 +- 0.015.
     fn noise_normal(&self) -> DMatrix<f64> {
         let mut c = DMatrix::<f64>::zeros(P, P);
-        c[(4, 4)] = self.var_xdd * self.w.iter().sum::<f64>();
-        if self.correct_velocity {
-            let s2 = self.var_xd;
-            for (i, &w) in self.w.iter().enumerate() {
-                let v2 = self.xd[i] * self.xd[i];
-                let v2u = v2 - s2;
-                let v4u = v2 * v2 - 6.0 * v2 * s2 + 3.0 * s2 * s2;
-                c[(6, 6)] += w * s2;
-                c[(6, 7)] += w * s2 * 3.0 * v2u;
-                c[(7, 7)] += w * s2 * 9.0 * v4u;
-            }
-            c[(7, 6)] = c[(6, 7)];
+        for (i, &w) in self.w.iter().enumerate() {
+            let part = self.noise_part(i);
+            c[(4, 4)] += w * part.m;
+            c[(6, 6)] += w * part.d1_d1;
+            c[(6, 7)] += w * part.d1_d2;
+            c[(7, 7)] += w * part.d2_d2;
         }
+        c[(7, 6)] = c[(6, 7)];
         c
     }
+
+    /// Sample `i`'s unweighted part of C ([`Samples::noise_normal`]): what its smoothed
+    /// acceleration's and velocity's noise adds, in expectation, to its part of J' W J. The
+    /// sandwich's scores ([`fit`]) take the same part out of each sample, so that they have
+    /// mean zero at the true parameters.
+    fn noise_part(&self, i: usize) -> NoisePart {
+        if !self.correct_velocity {
+            return NoisePart {
+                m: self.var_xdd,
+                ..NoisePart::default()
+            };
+        }
+        let s2 = self.var_xd;
+        let v2 = self.xd[i] * self.xd[i];
+        let v2u = v2 - s2;
+        let v4u = v2 * v2 - 6.0 * v2 * s2 + 3.0 * s2 * s2;
+        NoisePart {
+            m: self.var_xdd,
+            d1_d1: s2,
+            d1_d2: s2 * 3.0 * v2u,
+            d2_d2: s2 * 9.0 * v4u,
+        }
+    }
+}
+
+/// One sample's part of the noise matrix C ([`Samples::noise_part`]): on m's diagonal, and on
+/// d1's and d2's block.
+#[derive(Clone, Copy, Default)]
+struct NoisePart {
+    m: f64,
+    d1_d1: f64,
+    d1_d2: f64,
+    d2_d2: f64,
 }
 
 /// One fit: the parameters, their covariance, the reduced chi-square.
@@ -707,15 +740,38 @@ fn active(a: &DMatrix<f64>, free: &[bool; P]) -> Vec<usize> {
 
 /// Residuals of the model at `p`.
 fn residuals(design: &Design, s: &Samples, p: &[f64; P]) -> Vec<f64> {
-    let b = [p[0], p[1], p[2], p[3]];
-    (0..s.x.len())
-        .map(|i| {
-            s.f[i]
-                - spring_force(design, &b, s.x[i], s.loading[i])
-                - p[4] * s.xdd[i]
-                - p[5] * s.sgn[i]
-                - p[6] * s.xd[i]
-                - p[7] * s.cube(i)
+    residuals_on(design, s, p, &lifts(design, s, p[3]))
+}
+
+/// The made cam's pitch lift (mm) and pressure angle (rad) at each sample's deflection less
+/// the zero `zero_mm`: the part of the spring force that the build's rate, preload and
+/// friction leave alone, so that the Jacobian's differences in those reuse it.
+fn lifts(design: &Design, s: &Samples, zero_mm: f64) -> Vec<(f64, f64)> {
+    s.x.iter()
+        .map(|&x| pitch_at(&design.pitch_curve, x - zero_mm))
+        .collect()
+}
+
+/// [`residuals`] on the samples' [`lifts`] at `p`'s zero: the same numbers as
+/// [`spring_force`] at each sample.
+fn residuals_on(design: &Design, s: &Samples, p: &[f64; P], lifts: &[(f64, f64)]) -> Vec<f64> {
+    let build = Build {
+        rate: p[0],
+        preload_mm: p[1],
+        roller_mm: 0.0,
+        profile_mm: 0.0,
+        friction: p[2].max(0.0),
+    };
+    let phi = build.friction.atan();
+    let follower = &design.spec.follower;
+    lifts
+        .iter()
+        .enumerate()
+        .map(|(i, &(y, theta))| {
+            let q = spring_load_n(follower, &build, y, theta);
+            // A jammed build has no loading force: a steep penalty keeps the fit away from it.
+            let spring = stroke_rod_force(q, theta, phi, s.loading[i]).unwrap_or(1e6);
+            s.f[i] - spring - p[4] * s.xdd[i] - p[5] * s.sgn[i] - p[6] * s.xd[i] - p[7] * s.cube(i)
         })
         .collect()
 }
@@ -723,13 +779,25 @@ fn residuals(design: &Design, s: &Samples, p: &[f64; P]) -> Vec<f64> {
 /// d(model)/dp at `p`: central differences for the build parameters, the regressors for the
 /// linear ones.
 fn jacobian(design: &Design, s: &Samples, p: &[f64; P]) -> DMatrix<f64> {
+    jacobian_on(design, s, p, &lifts(design, s, p[3]))
+}
+
+/// [`jacobian`] with the samples' [`lifts`] at `p`'s zero given.
+fn jacobian_on(design: &Design, s: &Samples, p: &[f64; P], at_zero: &[(f64, f64)]) -> DMatrix<f64> {
     let m = s.x.len();
     let mut j = DMatrix::<f64>::zeros(m, P);
     for k in 0..4 {
         let (mut a, mut b) = (*p, *p);
         a[k] += STEPS[k];
         b[k] -= STEPS[k];
-        let (ra, rb) = (residuals(design, s, &a), residuals(design, s, &b));
+        let (ra, rb) = if k == 3 {
+            (residuals(design, s, &a), residuals(design, s, &b))
+        } else {
+            (
+                residuals_on(design, s, &a, at_zero),
+                residuals_on(design, s, &b, at_zero),
+            )
+        };
         for i in 0..m {
             j[(i, k)] = (rb[i] - ra[i]) / (2.0 * STEPS[k]);
         }
@@ -753,10 +821,12 @@ fn minimise(design: &Design, s: &Samples, mut p: [f64; P], free: &[bool; P]) -> 
         let q = as_vector(p);
         r.iter().zip(&s.w).map(|(a, w)| a * a * w).sum::<f64>() - (q.transpose() * &c * &q)[(0, 0)]
     };
-    let mut r = residuals(design, s, &p);
+    // The lifts at the current zero, computed again only when a step moves the zero.
+    let mut at_zero = lifts(design, s, p[3]);
+    let mut r = residuals_on(design, s, &p, &at_zero);
     let mut cost_now = cost(&r, &p);
     let mut lambda = 1e-3;
-    let mut j = jacobian(design, s, &p);
+    let mut j = jacobian_on(design, s, &p, &at_zero);
     let mut normal = weighted_normal(&j, &s.w) - &c;
     positive_definite(&normal, free)?;
     for _ in 0..60 {
@@ -773,11 +843,15 @@ fn minimise(design: &Design, s: &Samples, mut p: [f64; P], free: &[bool; P]) -> 
             }
             trial[2] = trial[2].clamp(0.0, 0.9);
             trial[0] = trial[0].max(-0.95);
-            let rt = residuals(design, s, &trial);
+            let moved = (trial[3] != p[3]).then(|| lifts(design, s, trial[3]));
+            let rt = residuals_on(design, s, &trial, moved.as_deref().unwrap_or(&at_zero));
             let ct = cost(&rt, &trial);
             if ct.is_finite() && ct <= cost_now {
                 let rel = (cost_now - ct) / cost_now.abs().max(1e-300);
                 p = trial;
+                if let Some(moved) = moved {
+                    at_zero = moved;
+                }
                 r = rt;
                 cost_now = ct;
                 lambda = (lambda / 10.0).max(1e-9);
@@ -789,7 +863,7 @@ fn minimise(design: &Design, s: &Samples, mut p: [f64; P], free: &[bool; P]) -> 
         if !improved {
             break;
         }
-        j = jacobian(design, s, &p);
+        j = jacobian_on(design, s, &p, &at_zero);
         normal = weighted_normal(&j, &s.w) - &c;
     }
     positive_definite(&normal, free)?;
@@ -804,6 +878,11 @@ fn positive_definite(a: &DMatrix<f64>, free: &[bool; P]) -> Option<()> {
 /// Rounds of weights: the first weights know no damping or inertia; the second and third
 /// take them from the fit before (as identification's WLS).
 const WEIGHT_ROUNDS: usize = 3;
+
+/// Rounds of the second stage, with the velocity's correction ([`fit`]): its weights are the
+/// first stage's, and two rounds more changed the parameters only in their third digit (Table I
+/// trapezoids, seed 1) for a third more time.
+const CORRECTED_ROUNDS: usize = 1;
 
 /// Levenberg-Marquardt from `p` (the design, and the zero if given) over the `free`
 /// parameters, then the sandwich covariance over blocks of `block` samples (zero for a fixed
@@ -838,7 +917,7 @@ fn fit(
     }
     let d0_uncorrected_n = p[5];
     s.correct_velocity = true;
-    for _ in 0..WEIGHT_ROUNDS {
+    for _ in 0..CORRECTED_ROUNDS {
         s.reweight(&p);
         p = minimise(design, s, p, free)?;
     }
@@ -868,13 +947,10 @@ fn fit(
         let mut gb = DVector::<f64>::zeros(q);
         for i in start..end {
             let mut score = DVector::<f64>::from_fn(P, |k, _| j[(i, k)] * r[i]);
-            score[4] += s.var_xdd * p[4];
-            if s.correct_velocity {
-                let v2 = s.xd[i] * s.xd[i] - s.var_xd;
-                let slope = p[6] + 3.0 * v2 * p[7];
-                score[6] += s.var_xd * slope;
-                score[7] += s.var_xd * 3.0 * v2 * slope;
-            }
+            let part = s.noise_part(i);
+            score[4] += part.m * p[4];
+            score[6] += part.d1_d1 * p[6] + part.d1_d2 * p[7];
+            score[7] += part.d1_d2 * p[6] + part.d2_d2 * p[7];
             for (u, &k) in act.iter().enumerate() {
                 gb[u] += s.w[i] * score[k];
             }
@@ -1164,16 +1240,16 @@ pub fn diagnose(
     // force_max (2.06 % against 2 %).
     let explains = |c: f64| (MIN_REDUCED_CHI2..=MAX_REDUCED_CHI2).contains(&c);
     let physical = |f: &WindowFit| f.fit.p[4] >= -3.0 * f.fit.cov[(4, 4)].max(0.0).sqrt();
-    fn compared(t: &Result<WindowFit, DiagnoseError>, min_share: f64) -> Option<&WindowFit> {
-        t.as_ref().ok().filter(|f| f.signal_share >= min_share)
-    }
-    let compared = |t| compared(t, min_share);
+    let compared: Vec<Option<&WindowFit>> = tried
+        .iter()
+        .map(|t| t.as_ref().ok().filter(|f| f.signal_share >= min_share))
+        .collect();
     // The start: the smallest chi-square among physical fits, or among all where none is.
     let smallest_where = |keep: &dyn Fn(&WindowFit) -> bool| {
-        tried
+        compared
             .iter()
             .enumerate()
-            .filter_map(|(i, t)| compared(t).filter(|f| keep(f)).map(|f| (i, f)))
+            .filter_map(|(i, f)| f.filter(|f| keep(f)).map(|f| (i, f)))
             .min_by(|a, b| {
                 a.1.reduced_chi2_with_transients
                     .total_cmp(&b.1.reduced_chi2_with_transients)
@@ -1183,14 +1259,14 @@ pub fn diagnose(
     let smallest = smallest_where(&physical).or_else(|| smallest_where(&|_| true));
     let kept = smallest.map(|start| {
         let mut last = start;
-        for (i, t) in tried.iter().enumerate().skip(start + 1) {
-            let Some(f) = compared(t) else { break };
+        for (i, f) in compared.iter().enumerate().skip(start + 1) {
+            let Some(f) = f else { break };
             if !explains(f.reduced_chi2_with_transients) || !physical(f) {
                 break;
             }
             let dof = f.samples.x.len().max(1) as f64;
             let rise = (CHI2_RISE_SIGMAS * (2.0 / dof).sqrt()).max(CHI2_RISE_MIN);
-            let distorted = tried[start..i].iter().filter_map(compared).any(|g| {
+            let distorted = compared[start..i].iter().flatten().any(|g| {
                 f.reduced_chi2_with_transients > g.reduced_chi2_with_transients * (1.0 + rise)
             });
             if distorted {
