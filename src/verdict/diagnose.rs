@@ -31,7 +31,7 @@ use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 
 use crate::cam::forces::stroke_rod_force;
-use crate::cam::tolerance::{build_curves, build_force_at, pitch_at, spring_load_n, Build};
+use crate::cam::tolerance::{build_curves, pitch_at, spring_load_n, Build};
 use crate::design::Design;
 use crate::estimate::adequacy::{MAX_REDUCED_CHI2, MIN_REDUCED_CHI2};
 use crate::estimate::identify::{
@@ -479,20 +479,35 @@ struct Fit {
 /// The build's rod force at logged deflection `x_mm` with build parameters `p` (rate, preload
 /// offset, friction, zero), on the loading or the unloading stroke.
 fn spring_force(design: &Design, p: &[f64; 4], x_mm: f64, loading: bool) -> f64 {
-    let b = Build {
+    let build = fitted_build(p);
+    let lift = pitch_at(&design.pitch_curve, x_mm - p[3]);
+    stroke_force(design, &build, build.friction.atan(), lift, loading)
+}
+
+/// The build that the fit's parameters `p` (rate, preload offset, friction) describe, with no
+/// roller or profile error.
+fn fitted_build(p: &[f64]) -> Build {
+    Build {
         rate: p[0],
         preload_mm: p[1],
         roller_mm: 0.0,
         profile_mm: 0.0,
         friction: p[2].max(0.0),
-    };
-    let (l, u) = build_force_at(&design.pitch_curve, &design.spec.follower, &b, x_mm - p[3]);
-    if loading {
-        // A jammed build has no loading force: a steep penalty keeps the fit away from it.
-        l.unwrap_or(1e6)
-    } else {
-        u
     }
+}
+
+/// The `build`'s rod force on one stroke where the made cam has pitch lift and pressure angle
+/// `(y, theta)`, with `phi` = atan(friction).
+fn stroke_force(
+    design: &Design,
+    build: &Build,
+    phi: f64,
+    (y, theta): (f64, f64),
+    loading: bool,
+) -> f64 {
+    let q = spring_load_n(&design.spec.follower, build, y, theta);
+    // A jammed build has no loading force: a steep penalty keeps the fit away from it.
+    stroke_rod_force(q, theta, phi, loading).unwrap_or(1e6)
 }
 
 /// The stroke of each sample (true: loading) from the turning points of `x`, or None within
@@ -755,23 +770,18 @@ fn lifts(design: &Design, s: &Samples, zero_mm: f64) -> Vec<(f64, f64)> {
 /// [`residuals`] on the samples' [`lifts`] at `p`'s zero: the same numbers as
 /// [`spring_force`] at each sample.
 fn residuals_on(design: &Design, s: &Samples, p: &[f64; P], lifts: &[(f64, f64)]) -> Vec<f64> {
-    let build = Build {
-        rate: p[0],
-        preload_mm: p[1],
-        roller_mm: 0.0,
-        profile_mm: 0.0,
-        friction: p[2].max(0.0),
-    };
+    let build = fitted_build(p);
     let phi = build.friction.atan();
-    let follower = &design.spec.follower;
     lifts
         .iter()
         .enumerate()
-        .map(|(i, &(y, theta))| {
-            let q = spring_load_n(follower, &build, y, theta);
-            // A jammed build has no loading force: a steep penalty keeps the fit away from it.
-            let spring = stroke_rod_force(q, theta, phi, s.loading[i]).unwrap_or(1e6);
-            s.f[i] - spring - p[4] * s.xdd[i] - p[5] * s.sgn[i] - p[6] * s.xd[i] - p[7] * s.cube(i)
+        .map(|(i, &lift)| {
+            s.f[i]
+                - stroke_force(design, &build, phi, lift, s.loading[i])
+                - p[4] * s.xdd[i]
+                - p[5] * s.sgn[i]
+                - p[6] * s.xd[i]
+                - p[7] * s.cube(i)
         })
         .collect()
 }
