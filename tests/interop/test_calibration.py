@@ -521,3 +521,16 @@ def test_a_bins_standard_error_holds_the_uncertainty_of_the_dynamics_taken_out(t
     assert rc == 0 and right["pass"], right["criteria"]
     rc, wrong = validate_json(tmp_path, tr, log, 1.05)
     assert rc == 1 and not wrong["pass"], wrong["criteria"]
+
+
+@pytest.mark.xfail(strict=True, reason="the diagnosis's binned curve misses the true law (docs/CALIBRATION.md, Still weak)")
+@pytest.mark.parametrize("i", [84, 86])
+def test_validate_passes_the_true_law_on_sweep_draws_84_and_86(tmp_path, i):
+    """Sweep draws 84 (a servo's ramp-holds of a light damper with a strong cube: m 0.21,
+    d1 0.058, d2 -0.0095, 500 Hz) and 86 (trapezoids of a heavily damped transmission, d1 2.81,
+    1 kHz): validate fails the true law on force_rms (3.33 and 3.82 % at a 3 % tolerance).
+    Found by the fifth session's sweep through validate and not fixed: a strict xfail, so that a
+    fix shows up."""
+    tr, log = sweep_log(tmp_path, i)
+    rc, right = validate_json(tmp_path, tr, log, 1.0)
+    assert rc == 0 and right["pass"], right["criteria"]
