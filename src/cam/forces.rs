@@ -41,18 +41,29 @@ pub struct RodForce {
 /// Returns `None` for loading where theta + phi >= 90 deg.
 pub fn rod_force(q_n: f64, theta_rad: f64, phi_rad: f64) -> (Option<f64>, f64) {
     (
-        stroke_rod_force(q_n, theta_rad, phi_rad, true),
-        q_n * (theta_rad - phi_rad).tan(),
+        loading_rod_force(q_n, theta_rad, phi_rad),
+        unloading_rod_force(q_n, theta_rad, phi_rad),
     )
 }
 
 /// The rod force of [`rod_force`] on one stroke only (`loading`), for callers that need one.
 pub fn stroke_rod_force(q_n: f64, theta_rad: f64, phi_rad: f64, loading: bool) -> Option<f64> {
-    if !loading {
-        return Some(q_n * (theta_rad - phi_rad).tan());
+    if loading {
+        loading_rod_force(q_n, theta_rad, phi_rad)
+    } else {
+        Some(unloading_rod_force(q_n, theta_rad, phi_rad))
     }
+}
+
+/// q*tan(theta + phi), `None` where the cam self-locks (theta + phi >= 90 deg).
+fn loading_rod_force(q_n: f64, theta_rad: f64, phi_rad: f64) -> Option<f64> {
     let load_angle = theta_rad + phi_rad;
     (load_angle < std::f64::consts::FRAC_PI_2).then(|| q_n * load_angle.tan())
+}
+
+/// q*tan(theta - phi).
+fn unloading_rod_force(q_n: f64, theta_rad: f64, phi_rad: f64) -> f64 {
+    q_n * (theta_rad - phi_rad).tan()
 }
 
 /// Plane-strain contact modulus E* from both materials: 1/E* = sum (1 - nu^2)/E.
