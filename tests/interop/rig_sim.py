@@ -178,10 +178,15 @@ def servo_ramps(t, levels, speeds, hold, lag, fine=20):
     return x[::fine], v[::fine], a[::fine]
 
 
-def force_driven(t, tr, f_lo, f_hi, freqs, rng, substeps=20):
+class Infeasible(Exception):
+    """A run that leaves what the rig allows (see `feasible`), found before its end."""
+
+
+def force_driven(t, tr, f_lo, f_hi, freqs, rng, substeps=20, v_limit=math.inf):
     """A force-controlled rig: F(t) commanded, the transmission's motion integrated (RK4 on
     each substep) with Karnopp stick-slip friction: a rod at rest stays at rest while the net
-    force is within +-d0 (static friction holds it), and slides against d0 sgn(v) otherwise."""
+    force is within +-d0 (static friction holds it), and slides against d0 sgn(v) otherwise.
+    Raises Infeasible as soon as a sample's speed reaches `v_limit` (mm/s)."""
     w = 2 * np.pi * np.asarray(freqs)
     ph = rng.uniform(0, 2 * np.pi, len(w))
     amp = 1.0 / w**0.5
@@ -191,68 +196,91 @@ def force_driven(t, tr, f_lo, f_hi, freqs, rng, substeps=20):
 
     def command(tt):
         # A smooth saturation, so that the run spends time near both ends of the range.
-        s = sum(a * math.sin(wi * tt + p) for a, wi, p in terms) / peak
-        return mid + half * math.tanh(2.5 * s) / math.tanh(2.5)
+        # Evaluated on arrays of times, once for every time the integration asks for.
+        s = np.zeros_like(tt)
+        for a, wi, p in terms:
+            s = s + a * np.sin(wi * tt + p)
+        s = s / peak
+        return mid + half * np.tanh(2.5 * s) / math.tanh(2.5)
 
     m, d0, d1, d2, mu, k2, f0 = tr.m, tr.d0, tr.d1, tr.d2, tr.mu, tr.k2, tr.f0
     v_stick = 1e-4  # mm/s: below this a rod counts as at rest
+    dt = (t[1] - t[0]) / substeps
+    f = command(np.asarray(t, dtype=float))
 
-    def net(tt, x, v):
-        """Force on the rod except the Coulomb friction."""
-        return command(tt) - (d1 * v + d2 * v * v * v) - mu * math.exp(k2 * x) - f0
+    def chunk(lo, hi):
+        """The command at samples lo..hi's substeps, at the times the integration steps: at
+        each substep's start (and the last one's end) and at its midpoint, accumulated as the
+        integration accumulates them (computed a block at a time: a run too fast for the rig
+        stops early)."""
+        starts = np.empty((hi - lo, substeps + 1))
+        mids = np.empty((hi - lo, substeps))
+        tt = np.asarray(t[lo:hi], dtype=float).copy()
+        for j in range(substeps):
+            starts[:, j] = tt
+            mids[:, j] = tt + dt / 2
+            tt = tt + dt
+        starts[:, substeps] = tt
+        return command(starts).tolist(), command(mids).tolist()
 
-    def accel(tt, x, v, sliding_sign):
+    def accel(c, x, v, sliding_sign):
+        """The rod's acceleration under the command c, sliding against d0 sliding_sign."""
         if abs(v) > 1e3:
             raise OverflowError("the rod runs away")
-        return (net(tt, x, v) - d0 * sliding_sign) / m
+        net = c - (d1 * v + d2 * v * v * v) - mu * math.exp(k2 * x) - f0
+        return (net - d0 * sliding_sign) / m
 
-    # Start at the equilibrium of the first command (spring alone).
-    x = math.log(max(command(0.0) - tr.f0, 1e-9) / tr.mu) / tr.k2
-    v = 0.0
-    dt = (t[1] - t[0]) / substeps
-    xs = np.empty_like(t)
-    vs = np.empty_like(t)
-    acc = np.empty_like(t)
-    tt = t[0]
-
-    def friction_state(tt, x, v):
+    def friction_state(c, x, v):
         """None while static friction holds the rod, else the sign the friction opposes."""
         if abs(v) < v_stick:
-            drive = net(tt, x, 0.0)
+            drive = c - mu * math.exp(k2 * x) - f0
             return None if abs(drive) <= d0 else math.copysign(1.0, drive)
         return math.copysign(1.0, v)
 
+    # Start at the equilibrium of the first command (spring alone).
+    x = math.log(max(float(f[0]) - tr.f0, 1e-9) / tr.mu) / tr.k2
+    v = 0.0
+    xs = np.empty_like(t)
+    vs = np.empty_like(t)
+    acc = np.empty_like(t)
+    block = 2000
     for i in range(len(t)):
+        if i % block == 0:
+            at_start, at_mid = chunk(i, min(i + block, len(t)))
         # The state at the sample's own time t[i], with the force commanded then.
-        tt = t[i]
-        s_now = friction_state(tt, x, v)
+        c0, ch = at_start[i % block], at_mid[i % block]
+        if abs(v) >= v_limit:
+            raise Infeasible(f"{abs(v)} mm/s at {t[i]} s")
+        s_now = friction_state(c0[0], x, v)
         xs[i], vs[i] = x, v
-        acc[i] = 0.0 if s_now is None else accel(tt, x, v, s_now)
-        for _ in range(substeps):
-            s_now = friction_state(tt, x, v)
+        acc[i] = 0.0 if s_now is None else accel(c0[0], x, v, s_now)
+        for j in range(substeps):
+            s_now = friction_state(c0[j], x, v)
             if s_now is None:
                 v = 0.0
-                tt += dt
                 continue
-            k1x, k1v = v, accel(tt, x, v, s_now)
-            k2x, k2v = v + dt / 2 * k1v, accel(tt + dt / 2, x + dt / 2 * k1x, v + dt / 2 * k1v, s_now)
-            k3x, k3v = v + dt / 2 * k2v, accel(tt + dt / 2, x + dt / 2 * k2x, v + dt / 2 * k2v, s_now)
-            k4x, k4v = v + dt * k3v, accel(tt + dt, x + dt * k3x, v + dt * k3v, s_now)
+            k1x, k1v = v, accel(c0[j], x, v, s_now)
+            k2x, k2v = v + dt / 2 * k1v, accel(ch[j], x + dt / 2 * k1x, v + dt / 2 * k1v, s_now)
+            k3x, k3v = v + dt / 2 * k2v, accel(ch[j], x + dt / 2 * k2x, v + dt / 2 * k2v, s_now)
+            k4x, k4v = v + dt * k3v, accel(c0[j + 1], x + dt * k3x, v + dt * k3v, s_now)
             nv = v + dt / 6 * (k1v + 2 * k2v + 2 * k3v + k4v)
             x += dt / 6 * (k1x + 2 * k2x + 2 * k3x + k4x)
             # Sliding stops where the velocity would change sign.
             v = 0.0 if nv * s_now < 0.0 else nv
-            tt += dt
-    f = np.array([command(ti) for ti in t])
     return xs, vs, acc, f
 
 
 SPEEDS = (1.0, 0.7, 0.5, 0.35, 0.25, 0.18, 0.12)
 
 
+# The share of the transmission's largest speed (where the damper force stops rising) a run
+# may reach.
+SPEED_SHARE = 0.8
+
+
 def feasible(tr, x, xd, xdd, f):
     """A wire only pulls, and the damper force must still rise with speed."""
-    return f.min() > 0.3 and np.max(np.abs(xd)) < 0.8 * tr.max_speed()
+    return f.min() > 0.3 and np.max(np.abs(xd)) < SPEED_SHARE * tr.max_speed()
 
 
 def motion(tr, rig, profile, t, xmax, speed, rng):
@@ -277,7 +305,7 @@ def motion(tr, rig, profile, t, xmax, speed, rng):
     if profile == "force":
         f_lo, f_hi = tr.spring(0.02 * xmax), tr.spring(0.98 * xmax)
         freqs = np.array([0.05, 0.13, 0.29]) * speed
-        return force_driven(t, tr, f_lo, f_hi, freqs, rng)
+        return force_driven(t, tr, f_lo, f_hi, freqs, rng, v_limit=SPEED_SHARE * tr.max_speed())
     raise ValueError(profile)
 
 
@@ -291,6 +319,8 @@ def run(tr, rig, profile, duration_s, xmax=15.0):
         try:
             x, xd, xdd, f = motion(tr, rig, profile, t, xmax, speed, rng)
         except OverflowError:  # a force-driven run whose damper force falls with speed runs away
+            continue
+        except Infeasible:  # a force-driven run that is already too fast
             continue
         if np.all(np.isfinite(x)) and feasible(tr, x, xd, xdd, f):
             break
