@@ -55,10 +55,21 @@ pub fn stroke_rod_force(q_n: f64, theta_rad: f64, phi_rad: f64, loading: bool) -
     }
 }
 
+/// The rod force per unit spring load on one stroke: tan(theta + phi) loading, tan(theta -
+/// phi) unloading; `None` where the loading stroke self-locks (theta + phi >= 90 deg). For
+/// callers that apply many spring loads at one friction angle.
+pub fn stroke_force_ratio(theta_rad: f64, phi_rad: f64, loading: bool) -> Option<f64> {
+    if loading {
+        let load_angle = theta_rad + phi_rad;
+        (load_angle < std::f64::consts::FRAC_PI_2).then(|| load_angle.tan())
+    } else {
+        Some((theta_rad - phi_rad).tan())
+    }
+}
+
 /// q*tan(theta + phi), `None` where the cam self-locks (theta + phi >= 90 deg).
 fn loading_rod_force(q_n: f64, theta_rad: f64, phi_rad: f64) -> Option<f64> {
-    let load_angle = theta_rad + phi_rad;
-    (load_angle < std::f64::consts::FRAC_PI_2).then(|| q_n * load_angle.tan())
+    stroke_force_ratio(theta_rad, phi_rad, true).map(|ratio| q_n * ratio)
 }
 
 /// q*tan(theta - phi).

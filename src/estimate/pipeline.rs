@@ -350,11 +350,13 @@ struct CoulombStage {
     /// Standard deviation of the force minus the frictionless model's, friction aside (N).
     predicted_std: f64,
     weights: [Vec<f64>; 3],
+    /// Where each kernel's weights may be nonzero ([`sg::Differentiator::taps`]).
+    taps: [(usize, usize); 3],
     stride: usize,
     dt: f64,
     band: f64,
     reach: usize,
-    positions: VecDeque<f64>,
+    positions: sg::SlidingWindow,
     waiting: VecDeque<(usize, Sample)>,
     last: Option<[f64; 3]>,
     /// Sample interval of the log (s).
@@ -447,11 +449,16 @@ impl CoulombStage {
                 diff.weights[sg::VELOCITY].clone(),
                 diff.weights[sg::ACCELERATION].clone(),
             ],
+            taps: [
+                diff.taps(sg::POSITION),
+                diff.taps(sg::VELOCITY),
+                diff.taps(sg::ACCELERATION),
+            ],
             stride,
             dt: dt * stride as f64,
             band,
             reach: diff.half * stride,
-            positions: VecDeque::new(),
+            positions: sg::SlidingWindow::new(2 * diff.half * stride + 1),
             waiting: VecDeque::new(),
             last: None,
             sample_dt: dt,
@@ -469,21 +476,14 @@ impl CoulombStage {
             return;
         }
         let span = 2 * self.reach + 1;
-        self.positions.push_back(s.position_mm);
-        if self.positions.len() > span {
-            self.positions.pop_front();
-        }
+        self.positions.push(s.position_mm);
         self.waiting.push_back((i, s));
         if self.positions.len() < span {
             return;
         }
         let mut smoothed = [0.0; 3];
-        for (k, w) in self.weights.iter().enumerate() {
-            smoothed[k] = w
-                .iter()
-                .enumerate()
-                .map(|(j, wj)| wj * self.positions[j * self.stride])
-                .sum::<f64>();
+        for (k, (w, &taps)) in self.weights.iter().zip(&self.taps).enumerate() {
+            smoothed[k] = sg::strided_sum(w, taps, self.positions.values(), self.stride);
         }
         smoothed[1] /= self.dt;
         smoothed[2] /= self.dt * self.dt;

@@ -119,16 +119,30 @@ impl Differentiator {
             return Vec::new();
         }
         let scale = 1.0 / dt.powi(Self::order(k));
-        let w = &self.weights[k];
+        let (first, stride) = self.taps(k);
+        let w = &self.weights[k][first..];
         (h..n - h)
             .map(|c| {
                 w.iter()
-                    .zip(&y[c - h..=c + h])
+                    .step_by(stride)
+                    .zip(y[c - h + first..=c + h].iter().step_by(stride))
                     .map(|(a, b)| a * b)
                     .sum::<f64>()
                     * scale
             })
             .collect()
+    }
+
+    /// Where kernel `k`'s weights may be nonzero: every `stride`-th from index `first`. The
+    /// kernels on odd or even offsets are zero at every other sample, and a sum that skips
+    /// those products is the same sum in half the time.
+    pub fn taps(&self, k: usize) -> (usize, usize) {
+        let h = self.half;
+        match k {
+            RATE => (0, 1),
+            POSITION | MOTION_VELOCITY => (1 - h % 2, 2),
+            _ => (h % 2, 2),
+        }
     }
 
     /// Variance of output `k` for white input noise of variance `var` sampled every `dt`.
@@ -144,6 +158,64 @@ impl Differentiator {
             _ => 1,
         }
     }
+}
+
+/// The last `span` values of a stream, oldest first, as one contiguous slice: each value is
+/// kept twice in a buffer of two spans, so a streaming kernel reads a plain slice rather than
+/// a ring's wrapped indices.
+#[derive(Debug, Clone)]
+pub struct SlidingWindow {
+    buf: Vec<f64>,
+    span: usize,
+    next: usize,
+    len: usize,
+}
+
+impl SlidingWindow {
+    /// An empty window of `span` values (at least one).
+    pub fn new(span: usize) -> SlidingWindow {
+        let span = span.max(1);
+        SlidingWindow {
+            buf: vec![0.0; 2 * span],
+            span,
+            next: 0,
+            len: 0,
+        }
+    }
+
+    /// Appends `value`, dropping the oldest once the window is full.
+    pub fn push(&mut self, value: f64) {
+        self.buf[self.next] = value;
+        self.buf[self.next + self.span] = value;
+        self.next = (self.next + 1) % self.span;
+        self.len = (self.len + 1).min(self.span);
+    }
+
+    /// How many values the window holds.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Whether the window holds nothing yet.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// The values held, oldest first.
+    pub fn values(&self) -> &[f64] {
+        &self.buf[self.next + self.span - self.len..self.next + self.span]
+    }
+}
+
+/// Kernel `k`'s weights `w` (every `taps`-th from its first, [`Differentiator::taps`]) against
+/// every `stride`-th value of `values` (oldest first): the same sum as over all weights.
+pub fn strided_sum(w: &[f64], (first, step): (usize, usize), values: &[f64], stride: usize) -> f64 {
+    w[first..]
+        .iter()
+        .step_by(step)
+        .zip(values[first * stride..].iter().step_by(step * stride))
+        .map(|(a, b)| a * b)
+        .sum::<f64>()
 }
 
 #[cfg(test)]
@@ -176,6 +248,77 @@ mod tests {
                 .map(|(x, y)| x * y)
                 .sum();
             assert!(dot.abs() < 1e-12, "kernels {a} and {b}: {dot}");
+        }
+    }
+
+    #[test]
+    fn the_strided_sum_skips_only_zero_weights() {
+        // Windows with an even and an odd half width: every skipped weight is zero, and the
+        // output is the full convolution's.
+        let y: Vec<f64> = (0..300)
+            .map(|i| (i as f64 * 0.37).sin() * 3.0 + i as f64)
+            .collect();
+        for window in [21, 23, 41, 43] {
+            let d = Differentiator::new(window);
+            let h = d.half;
+            for k in [POSITION, VELOCITY, ACCELERATION, MOTION_VELOCITY, RATE] {
+                let (first, stride) = d.taps(k);
+                let skipped = d.weights[k]
+                    .iter()
+                    .enumerate()
+                    .filter(|(j, _)| *j < first || (j - first) % stride != 0);
+                assert!(skipped.clone().all(|(_, w)| *w == 0.0), "{window} {k}");
+                assert!(d.weights[k].iter().filter(|w| **w != 0.0).count() >= h - 1);
+                let full: Vec<f64> = (h..y.len() - h)
+                    .map(|c| {
+                        (0..=2 * h)
+                            .map(|j| d.weights[k][j] * y[c - h + j])
+                            .sum::<f64>()
+                            / 0.01f64.powi(Differentiator::order(k))
+                    })
+                    .collect();
+                let fast = d.apply(&y, 0.01, k);
+                assert_eq!(fast.len(), full.len());
+                for (a, b) in fast.iter().zip(&full) {
+                    assert!(
+                        (a - b).abs() <= 1e-9 * b.abs().max(1.0),
+                        "{window} {k}: {a} {b}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_sliding_window_holds_the_last_values_in_order() {
+        let mut w = SlidingWindow::new(5);
+        assert!(w.is_empty() && w.values().is_empty());
+        for v in 0..13u32 {
+            w.push(v as f64);
+            let expected: Vec<f64> = (v.saturating_sub(4)..=v).map(|u| u as f64).collect();
+            assert_eq!(w.values(), expected.as_slice());
+            assert_eq!(w.len(), expected.len());
+        }
+    }
+
+    #[test]
+    fn the_strided_sum_is_the_sum_over_every_weight() {
+        let d = Differentiator::new(41);
+        let stride = 3;
+        let values: Vec<f64> = (0..(2 * d.half) * stride + 1)
+            .map(|i| (i as f64 * 0.11).cos() + 0.01 * i as f64)
+            .collect();
+        for k in [POSITION, VELOCITY, ACCELERATION, MOTION_VELOCITY, RATE] {
+            let full: f64 = d.weights[k]
+                .iter()
+                .enumerate()
+                .map(|(j, w)| w * values[j * stride])
+                .sum();
+            let fast = strided_sum(&d.weights[k], d.taps(k), &values, stride);
+            assert!(
+                (fast - full).abs() <= 1e-12 * full.abs().max(1.0),
+                "{k}: {fast} {full}"
+            );
         }
     }
 

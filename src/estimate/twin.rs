@@ -107,9 +107,11 @@ impl MotionFilter {
 pub struct TwinSource {
     truth: TwinTruth,
     weights: Vec<f64>,
+    /// Where the weights may be nonzero ([`sg::Differentiator::taps`]).
+    taps: (usize, usize),
     stride: usize,
     reach: usize,
-    positions: VecDeque<f64>,
+    positions: sg::SlidingWindow,
     waiting: VecDeque<(usize, f64)>,
     last: Option<f64>,
     motion: MotionFilter,
@@ -159,9 +161,10 @@ impl TwinSource {
         TwinSource {
             truth,
             weights: diff.weights[sg::POSITION].clone(),
+            taps: diff.taps(sg::POSITION),
             stride,
             reach: diff.half * stride,
-            positions: VecDeque::new(),
+            positions: sg::SlidingWindow::new(2 * diff.half * stride + 1),
             waiting: VecDeque::new(),
             last: None,
             motion,
@@ -176,20 +179,17 @@ impl TwinSource {
     /// Takes logged sample `i` (in order from 0).
     pub fn push(&mut self, i: usize, s: &Sample) {
         let span = 2 * self.reach + 1;
-        self.positions.push_back(s.position_mm);
-        if self.positions.len() > span {
-            self.positions.pop_front();
-        }
+        self.positions.push(s.position_mm);
         self.waiting.push_back((i, s.t_s));
         if self.positions.len() < span {
             return;
         }
-        let smoothed: f64 = self
-            .weights
-            .iter()
-            .enumerate()
-            .map(|(j, w)| w * self.positions[j * self.stride])
-            .sum();
+        let smoothed = sg::strided_sum(
+            &self.weights,
+            self.taps,
+            self.positions.values(),
+            self.stride,
+        );
         let centre = i - self.reach;
         // The first smoothed value also stands for the samples before its centre.
         while let Some(&(j, t)) = self.waiting.front() {
@@ -206,7 +206,7 @@ impl TwinSource {
     /// shorter than a window, the mean of its positions).
     pub fn finish(&mut self) {
         let x = self.last.unwrap_or_else(|| {
-            self.positions.iter().sum::<f64>() / self.positions.len().max(1) as f64
+            self.positions.values().iter().sum::<f64>() / self.positions.len().max(1) as f64
         });
         while let Some((j, t)) = self.waiting.pop_front() {
             self.emit(j, t, x);

@@ -30,7 +30,7 @@
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 
-use crate::cam::forces::stroke_rod_force;
+use crate::cam::forces::{stroke_force_ratio, stroke_rod_force};
 use crate::cam::tolerance::{build_curves, pitch_at, spring_load_n, Build};
 use crate::design::Design;
 use crate::estimate::adequacy::{MAX_REDUCED_CHI2, MIN_REDUCED_CHI2};
@@ -507,8 +507,11 @@ fn stroke_force(
 ) -> f64 {
     let q = spring_load_n(&design.spec.follower, build, y, theta);
     // A jammed build has no loading force: a steep penalty keeps the fit away from it.
-    stroke_rod_force(q, theta, phi, loading).unwrap_or(1e6)
+    stroke_rod_force(q, theta, phi, loading).unwrap_or(JAMMED_N)
 }
+
+/// The model's force where a build jams (N): a penalty that keeps the fit away from it.
+const JAMMED_N: f64 = 1e6;
 
 /// The stroke of each sample (true: loading) from the turning points of `x`, or None within
 /// `turn` of a turning point's position around it.
@@ -810,14 +813,38 @@ fn lifts(design: &Design, s: &Samples, zero_mm: f64) -> Vec<(f64, f64)> {
 /// [`residuals`] on the samples' [`lifts`] at `p`'s zero: the same numbers as
 /// [`spring_force`] at each sample.
 fn residuals_on(design: &Design, s: &Samples, p: &[f64; P], lifts: &[(f64, f64)]) -> Vec<f64> {
-    let build = fitted_build(p);
-    let phi = build.friction.atan();
+    let ratios = force_ratios(s, lifts, fitted_build(p).friction.atan());
+    residuals_with(design, s, p, lifts, &ratios)
+}
+
+/// Each sample's [`stroke_force_ratio`] at the friction angle `phi`: what the rate and preload
+/// differences of the Jacobian share.
+fn force_ratios(s: &Samples, lifts: &[(f64, f64)], phi: f64) -> Vec<Option<f64>> {
     lifts
         .iter()
+        .zip(&s.loading)
+        .map(|(&(_, theta), &loading)| stroke_force_ratio(theta, phi, loading))
+        .collect()
+}
+
+/// [`residuals_on`] with the samples' force ratios at `p`'s friction given.
+fn residuals_with(
+    design: &Design,
+    s: &Samples,
+    p: &[f64; P],
+    lifts: &[(f64, f64)],
+    ratios: &[Option<f64>],
+) -> Vec<f64> {
+    let build = fitted_build(p);
+    lifts
+        .iter()
+        .zip(ratios)
         .enumerate()
-        .map(|(i, &lift)| {
+        .map(|(i, (&(y, theta), ratio))| {
+            let q = spring_load_n(&design.spec.follower, &build, y, theta);
+            // A jammed build has no loading force: a steep penalty keeps the fit away from it.
             s.f[i]
-                - stroke_force(design, &build, phi, lift, s.loading[i])
+                - ratio.map_or(JAMMED_N, |ratio| q * ratio)
                 - p[4] * s.xdd[i]
                 - p[5] * s.sgn[i]
                 - p[6] * s.xd[i]
@@ -827,21 +854,33 @@ fn residuals_on(design: &Design, s: &Samples, p: &[f64; P], lifts: &[(f64, f64)]
 }
 
 /// d(model)/dp at `p`, with the samples' [`lifts`] at `p`'s zero given: central differences
-/// for the build parameters, the regressors for the linear ones.
-fn jacobian_on(design: &Design, s: &Samples, p: &[f64; P], at_zero: &[(f64, f64)]) -> DMatrix<f64> {
+/// for the free build parameters, the regressors for the linear ones. A fixed build
+/// parameter's column is left zero: neither the steps nor the covariance read it ([`active`]),
+/// and the zero's, taken as logged by default, costs the cam's lifts twice over.
+fn jacobian_on(
+    design: &Design,
+    s: &Samples,
+    p: &[f64; P],
+    at_zero: &[(f64, f64)],
+    free: &[bool; P],
+) -> DMatrix<f64> {
     let m = s.x.len();
     let mut j = DMatrix::<f64>::zeros(m, P);
-    for k in 0..4 {
+    let ratios = force_ratios(s, at_zero, fitted_build(p).friction.atan());
+    for k in (0..4).filter(|&k| free[k]) {
         let (mut a, mut b) = (*p, *p);
         a[k] += STEPS[k];
         b[k] -= STEPS[k];
-        let (ra, rb) = if k == 3 {
-            (residuals(design, s, &a), residuals(design, s, &b))
-        } else {
-            (
+        let (ra, rb) = match k {
+            0 | 1 => (
+                residuals_with(design, s, &a, at_zero, &ratios),
+                residuals_with(design, s, &b, at_zero, &ratios),
+            ),
+            2 => (
                 residuals_on(design, s, &a, at_zero),
                 residuals_on(design, s, &b, at_zero),
-            )
+            ),
+            _ => (residuals(design, s, &a), residuals(design, s, &b)),
         };
         for i in 0..m {
             j[(i, k)] = (rb[i] - ra[i]) / (2.0 * STEPS[k]);
@@ -871,7 +910,7 @@ fn minimise(design: &Design, s: &Samples, mut p: [f64; P], free: &[bool; P]) -> 
     let mut r = residuals_on(design, s, &p, &at_zero);
     let mut cost_now = cost(&r, &p);
     let mut lambda = 1e-3;
-    let mut j = jacobian_on(design, s, &p, &at_zero);
+    let mut j = jacobian_on(design, s, &p, &at_zero, free);
     let mut normal = weighted_normal(&j, &s.w) - &c;
     positive_definite(&normal, free)?;
     for _ in 0..60 {
@@ -908,7 +947,7 @@ fn minimise(design: &Design, s: &Samples, mut p: [f64; P], free: &[bool; P]) -> 
         if !improved {
             break;
         }
-        j = jacobian_on(design, s, &p, &at_zero);
+        j = jacobian_on(design, s, &p, &at_zero, free);
         normal = weighted_normal(&j, &s.w) - &c;
     }
     positive_definite(&normal, free)?;
@@ -972,7 +1011,7 @@ fn fit(
     let at_zero = lifts(design, s, p[3]);
     let r = residuals_on(design, s, &p, &at_zero);
     let c = s.noise_normal();
-    let j = jacobian_on(design, s, &p, &at_zero);
+    let j = jacobian_on(design, s, &p, &at_zero, free);
     let normal = weighted_normal(&j, &s.w) - &c;
     let chi2: f64 = r.iter().zip(&s.w).map(|(a, w)| a * a * w).sum();
     // Sandwich: (J'WJ - C)^-1 (sum over blocks of g_b g_b') (J'WJ - C)^-1, g_b the block's
