@@ -46,15 +46,6 @@ pub fn rod_force(q_n: f64, theta_rad: f64, phi_rad: f64) -> (Option<f64>, f64) {
     )
 }
 
-/// The rod force of [`rod_force`] on one stroke only (`loading`), for callers that need one.
-pub fn stroke_rod_force(q_n: f64, theta_rad: f64, phi_rad: f64, loading: bool) -> Option<f64> {
-    if loading {
-        loading_rod_force(q_n, theta_rad, phi_rad)
-    } else {
-        Some(unloading_rod_force(q_n, theta_rad, phi_rad))
-    }
-}
-
 /// The rod force per unit spring load on one stroke: tan(theta + phi) loading, tan(theta -
 /// phi) unloading; `None` where the loading stroke self-locks (theta + phi >= 90 deg). For
 /// callers that apply many spring loads at one friction angle.

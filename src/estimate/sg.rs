@@ -119,17 +119,9 @@ impl Differentiator {
             return Vec::new();
         }
         let scale = 1.0 / dt.powi(Self::order(k));
-        let (first, stride) = self.taps(k);
-        let w = &self.weights[k][first..];
+        let (w, taps) = (&self.weights[k], self.taps(k));
         (h..n - h)
-            .map(|c| {
-                w.iter()
-                    .step_by(stride)
-                    .zip(y[c - h + first..=c + h].iter().step_by(stride))
-                    .map(|(a, b)| a * b)
-                    .sum::<f64>()
-                    * scale
-            })
+            .map(|c| strided_sum(w, taps, &y[c - h..=c + h], 1) * scale)
             .collect()
     }
 

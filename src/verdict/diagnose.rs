@@ -30,7 +30,7 @@
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 
-use crate::cam::forces::{stroke_force_ratio, stroke_rod_force};
+use crate::cam::forces::stroke_force_ratio;
 use crate::cam::tolerance::{build_curves, pitch_at, spring_load_n, Build};
 use crate::design::Design;
 use crate::estimate::adequacy::{MAX_REDUCED_CHI2, MIN_REDUCED_CHI2};
@@ -506,11 +506,11 @@ fn stroke_force(
     loading: bool,
 ) -> f64 {
     let q = spring_load_n(&design.spec.follower, build, y, theta);
-    // A jammed build has no loading force: a steep penalty keeps the fit away from it.
-    stroke_rod_force(q, theta, phi, loading).unwrap_or(JAMMED_N)
+    stroke_force_ratio(theta, phi, loading).map_or(JAMMED_N, |ratio| q * ratio)
 }
 
-/// The model's force where a build jams (N): a penalty that keeps the fit away from it.
+/// The model's force where a build jams (N): it has no loading force, and a steep penalty
+/// keeps the fit away from it.
 const JAMMED_N: f64 = 1e6;
 
 /// The stroke of each sample (true: loading) from the turning points of `x`, or None within
@@ -842,7 +842,6 @@ fn residuals_with(
         .enumerate()
         .map(|(i, (&(y, theta), ratio))| {
             let q = spring_load_n(&design.spec.follower, &build, y, theta);
-            // A jammed build has no loading force: a steep penalty keeps the fit away from it.
             s.f[i]
                 - ratio.map_or(JAMMED_N, |ratio| q * ratio)
                 - p[4] * s.xdd[i]
