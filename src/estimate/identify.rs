@@ -554,10 +554,16 @@ fn row_correction(r: &Rows, i: usize, active: &Active) -> M7 {
 
 /// The noise part C = sum_i w_i C_i of the normal matrix.
 fn correction(r: &Rows, active: &Active, weights: &[f64]) -> M7 {
+    // Only the four entries row_correction can fill are summed.
+    const ENTRIES: [(usize, usize); 4] = [(M, M), (D1, D1), (D1, D2), (D2, D2)];
     let mut c = M7::zeros();
     for (i, &w) in weights.iter().enumerate() {
-        c += row_correction(r, i, active) * w;
+        let ci = row_correction(r, i, active);
+        for (a, b) in ENTRIES {
+            c[(a, b)] += ci[(a, b)] * w;
+        }
     }
+    c[(D2, D1)] = c[(D1, D2)];
     c
 }
 
@@ -592,6 +598,12 @@ fn prune_all(p: &mut V7, r: &Rows, active: &mut Active, weights: &[f64]) -> Vec<
 /// variables). Subtracting the noise part of the normal matrix (corrected least squares,
 /// Fuller 1987) removes that bias.
 fn normal(p: &V7, r: &Rows, active: &Active, weights: &[f64]) -> (M7, V7, f64) {
+    normal_with(p, r, active, weights, &correction(r, active, weights))
+}
+
+/// [`normal`] with its noise part `c` (= `correction(r, active, weights)`) given: it depends
+/// on the weights and the active set only, not on the parameters.
+fn normal_with(p: &V7, r: &Rows, active: &Active, weights: &[f64], c: &M7) -> (M7, V7, f64) {
     let mut jtj = M7::zeros();
     let mut jtr = V7::zeros();
     let mut chi2 = 0.0;
@@ -599,13 +611,30 @@ fn normal(p: &V7, r: &Rows, active: &Active, weights: &[f64]) -> (M7, V7, f64) {
         let (f, row) = model(p, r, i);
         let row = masked(row, active);
         let res = r.f[i] - f;
-        jtj += row * row.transpose() * w;
+        // The upper triangle of row row^T w, mirrored below once the sums are done.
+        for b in 0..7 {
+            for a in 0..=b {
+                jtj[(a, b)] += row[a] * row[b] * w;
+            }
+        }
         jtr += row * (w * res);
         chi2 += w * res * res;
     }
-    let c = correction(r, active, weights);
+    jtj.fill_lower_triangle_with_upper_triangle();
     let cp = c * p;
     (jtj - c, jtr + cp, chi2 - p.dot(&cp))
+}
+
+/// The corrected objective of [`normal_with`] alone (the line search needs no matrix); the
+/// same sums in the same order, so the same number.
+fn objective(p: &V7, r: &Rows, weights: &[f64], c: &M7) -> f64 {
+    let mut chi2 = 0.0;
+    for (i, &w) in weights.iter().enumerate() {
+        let (f, _) = model(p, r, i);
+        let res = r.f[i] - f;
+        chi2 += w * res * res;
+    }
+    chi2 - p.dot(&(c * p))
 }
 
 /// Indices of the active parameters and the square roots of their diagonal entries.
@@ -724,13 +753,14 @@ fn gauss_newton(
     iterations: usize,
 ) -> Result<(V7, Vec<String>), IdentifyError> {
     let mut weights = weights_at(&p, r);
-    let (mut jtj, mut jtr, mut chi2) = normal(&p, r, active, &weights);
+    let mut c = correction(r, active, &weights);
+    let (mut jtj, mut jtr, mut chi2) = normal_with(&p, r, active, &weights, &c);
     let mut removed = Vec::new();
     for _ in 0..iterations {
         let Some(dp) = solve(&jtj, &jtr, active) else {
             // A structural null direction first; otherwise the corrected matrix lost
             // definiteness through a noise-corrected column: m, then d2, then d1.
-            let mut dropped = prune(&(jtj + correction(r, active, &weights)), active);
+            let mut dropped = prune(&(jtj + c), active);
             if dropped.is_empty() {
                 if let Some(k) = NOISY_ORDER.into_iter().find(|&k| active[k]) {
                     active[k] = false;
@@ -744,7 +774,8 @@ fn gauss_newton(
             }
             removed.extend(dropped);
             drop_inactive(&mut p, active);
-            (jtj, jtr, chi2) = normal(&p, r, active, &weights);
+            c = correction(r, active, &weights);
+            (jtj, jtr, chi2) = normal_with(&p, r, active, &weights, &c);
             continue;
         };
         // Converged when the full step would lower chi-square by less than 1e-8: far below
@@ -756,21 +787,22 @@ fn gauss_newton(
         let mut improved = None;
         for _ in 0..40 {
             let trial = p + dp * step;
-            let (j2, r2, c2) = normal(&trial, r, active, &weights);
+            let c2 = objective(&trial, r, &weights, &c);
             if c2.is_finite() && c2 <= chi2 {
-                improved = Some((trial, j2, r2, c2));
+                improved = Some((trial, c2));
                 break;
             }
             step *= 0.5;
         }
         // No descent along the Gauss-Newton direction: at the minimum within rounding.
-        let Some((trial, _, _, c2)) = improved else {
+        let Some((trial, c2)) = improved else {
             break;
         };
         let rel = (chi2 - c2) / chi2.max(1e-300);
         p = trial;
         weights = weights_at(&p, r);
-        (jtj, jtr, chi2) = normal(&p, r, active, &weights);
+        c = correction(r, active, &weights);
+        (jtj, jtr, chi2) = normal_with(&p, r, active, &weights, &c);
         if rel < 1e-12 && step == 1.0 {
             break;
         }
@@ -1156,16 +1188,19 @@ pub(super) fn fit_model(
     let mut best = (f64::INFINITY, V7::zeros());
     for g in 0..120 {
         let k2 = 1e-4 * 10f64.powf(g as f64 * 5.0 / 119.0);
+        let e: Vec<f64> = qs_rows.x.iter().map(|&x| (k2 * x).exp()).collect();
         let mut a = SMatrix::<f64, 2, 2>::zeros();
         let mut b = SVector::<f64, 2>::zeros();
-        for i in 0..qs_rows.f.len() {
-            let v = SVector::<f64, 2>::new((k2 * qs_rows.x[i]).exp(), 1.0);
+        for (&ei, &fi) in e.iter().zip(&qs_rows.f) {
+            let v = SVector::<f64, 2>::new(ei, 1.0);
             a += v * v.transpose();
-            b += v * qs_rows.f[i];
+            b += v * fi;
         }
         if let Some(sol) = a.cholesky().map(|c| c.solve(&b)) {
-            let ssr: f64 = (0..qs_rows.f.len())
-                .map(|i| (qs_rows.f[i] - sol[0] * (k2 * qs_rows.x[i]).exp() - sol[1]).powi(2))
+            let ssr: f64 = e
+                .iter()
+                .zip(&qs_rows.f)
+                .map(|(&ei, &fi)| (fi - sol[0] * ei - sol[1]).powi(2))
                 .sum();
             if ssr.is_finite() && ssr < best.0 {
                 best = (ssr, V7::from([0.0, 0.0, 0.0, 0.0, sol[0], sol[1], k2]));
