@@ -62,6 +62,25 @@ def design_into(spec_text_or_path, out_dir, fine=True):
     return out_dir / "out", json.loads((out_dir / "out" / "design.json").read_text())
 
 
+def pytest_collection_modifyitems(config, items):
+    """Keeps together the tests that share one value of a module- or session-scoped fixture
+    (the `case` logs of test_calibration, the `design` runs): under pytest-xdist's
+    `--dist loadgroup` they then run on one worker, and each log or design is made once."""
+    for item in items:
+        callspec = getattr(item, "callspec", None)
+        if callspec is None:
+            continue
+        fixtures = item._fixtureinfo.name2fixturedefs
+        for name, index in sorted(callspec.indices.items()):
+            defs = fixtures.get(name)
+            if defs and defs[-1].scope == "session":
+                item.add_marker(pytest.mark.xdist_group(f"{name}[{index}]"))
+                break
+            if defs and defs[-1].scope == "module":
+                item.add_marker(pytest.mark.xdist_group(f"{item.module.__name__}:{name}[{index}]"))
+                break
+
+
 @pytest.fixture(scope="session", params=["paper", "ankle", "one-follower", "knee"])
 def design(request, tmp_path_factory):
     base = tmp_path_factory.mktemp(request.param)
