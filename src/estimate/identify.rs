@@ -872,18 +872,22 @@ fn sandwich(
     if positive(&cov) {
         return Some((cov, CovarianceMethod::Truncated));
     }
+    // Bartlett: S = sum_i g_i g_i^T + sum_i (g_i u_i^T + u_i g_i^T), where u_i is the
+    // Bartlett-weighted sum of the later scores within the lag (one vector sum per pair
+    // instead of one outer product).
     let mut bartlett = M7::zeros();
     let wide = 2 * lag;
     for i in 0..scores.len() {
-        bartlett += scores[i] * scores[i].transpose();
-        for j in i + 1..scores.len() {
-            let l = r.index[j] - r.index[i];
+        let mut later = V7::zeros();
+        for (score, index) in scores[i + 1..].iter().zip(&r.index[i + 1..]) {
+            let l = index - r.index[i];
             if l > wide {
                 break;
             }
-            let c = scores[i] * scores[j].transpose() * (1.0 - l as f64 / (wide + 1) as f64);
-            bartlett += c + c.transpose();
+            later += score * (1.0 - l as f64 / (wide + 1) as f64);
         }
+        let c = scores[i] * later.transpose();
+        bartlett += scores[i] * scores[i].transpose() + c + c.transpose();
     }
     let cov = hinv * bartlett * hinv;
     if positive(&cov) {
