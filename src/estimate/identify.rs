@@ -573,8 +573,8 @@ fn correction(r: &Rows, active: &Active, weights: &[f64]) -> M7 {
 /// filter window). A parameter whose corrected information is positive is kept, however
 /// noisy: removing a force the log carries would bias the others.
 fn prune_all(p: &mut V7, r: &Rows, active: &mut Active, weights: &[f64]) -> Vec<String> {
-    let (jtj, _, _) = normal(p, r, active, weights);
     let c = correction(r, active, weights);
+    let (jtj, _, _) = normal_with(p, r, active, weights, &c);
     let mut removed = prune(&(jtj + c), active);
     for k in NOISY_ORDER {
         let (jtj, _, _) = normal(p, r, active, weights);
