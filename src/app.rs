@@ -734,6 +734,26 @@ impl Verdict {
             Verdict::Curve(v) => v.pass,
         }
     }
+
+    /// Whether the log judges the law at all ([`crate::verdict::validate::judged`]).
+    pub fn judged(&self) -> bool {
+        match self {
+            Verdict::Law(v) => v.judged,
+            Verdict::Curve(v) => v.judged,
+        }
+    }
+
+    /// The exit code: 0 for a pass (conclusive or not), 1 for a failure, 2 for a log that
+    /// judges nothing (the input cannot decide; the report and plots are still written).
+    pub fn exit_code(&self) -> u8 {
+        if !self.judged() {
+            EXIT_BAD_INPUT
+        } else if self.pass() {
+            EXIT_OK
+        } else {
+            EXIT_CHECK_FAILED
+        }
+    }
 }
 
 /// Runs `camspring validate`: the log against the spec's designed law; writes
@@ -900,9 +920,10 @@ pub fn run_validate(
                 v.pass = v.criteria.iter().all(|c| c.pass);
             }
             let (c, cov) = judge_coverage(v.range_min_mm, v.range_max_mm);
-            v.pass &= c.pass;
+            let all_pass = v.pass && c.pass;
             v.criteria.push(c);
-            v.conclusive = crate::verdict::validate::conclusive(v.pass, &v.criteria);
+            (v.pass, v.conclusive, v.judged) =
+                crate::verdict::validate::settle(&v.criteria, all_pass);
             v.coverage = Some(cov);
             v.diagnosis = diagnosis.clone();
             // The measured force-deflection points come from the quasi-static curve.
@@ -919,7 +940,7 @@ pub fn run_validate(
             };
             let html = crate::render::html::validation_html(
                 &v,
-                &svg_text,
+                est.as_ref().map(|_| svg_text.as_str()),
                 &log_name,
                 &force_svg,
                 &diagnosis_html,
@@ -933,9 +954,10 @@ pub fn run_validate(
                 v.pass = !v.bins.is_empty() && v.criteria.iter().all(|c| c.pass);
             }
             let (c, cov) = judge_coverage(v.range_min_mm, v.range_max_mm);
-            v.pass &= c.pass;
+            let all_pass = v.pass && c.pass;
             v.criteria.push(c);
-            v.conclusive = crate::verdict::validate::conclusive(v.pass, &v.criteria);
+            (v.pass, v.conclusive, v.judged) =
+                crate::verdict::validate::settle(&v.criteria, all_pass);
             v.coverage = Some(cov);
             v.diagnosis = diagnosis.clone();
             let svg_text = curve_validation_svg(&v);

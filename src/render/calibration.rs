@@ -611,7 +611,7 @@ pub fn format_validation(v: &Validation) -> String {
     let _ = writeln!(
         s,
         "{}  against F = {:.6} N * exp({:.6} /mm * x) + {:.6} N over x = {:.3} ... {:.3} mm",
-        crate::verdict::validate::verdict_word(v.pass, v.conclusive),
+        crate::verdict::validate::verdict_word(v.pass, v.conclusive, v.judged),
         v.designed.mu_n,
         v.designed.k2_per_mm,
         v.designed.f0_n,
@@ -810,7 +810,7 @@ pub fn format_curve_validation(v: &CurveValidation) -> String {
     let _ = writeln!(
         s,
         "{}  quasi-static force curve against the designed law over x = {:.3} ... {:.3} mm",
-        crate::verdict::validate::verdict_word(v.pass, v.conclusive),
+        crate::verdict::validate::verdict_word(v.pass, v.conclusive, v.judged),
         v.range_min_mm,
         v.range_max_mm
     );

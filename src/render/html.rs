@@ -31,7 +31,7 @@ pub(crate) fn escape(text: &str) -> String {
 fn badge(status: &str) -> String {
     let class = match status {
         "pass" | "PASS" => "pass",
-        "warn" | "WARN" | "NOT SHOWN" | "PASS, NOT CONCLUSIVE" => "warn",
+        "warn" | "WARN" | "NOT SHOWN" | "PASS, NOT CONCLUSIVE" | "NOT JUDGED" => "warn",
         _ => "fail",
     };
     format!(
@@ -426,13 +426,13 @@ fn criteria_rows(h: &mut String, criteria: &[crate::verdict::validate::Criterion
 /// `validation.html`: the verdict, the criteria and the plots of `validation.svg`.
 pub fn validation_html(
     v: &crate::verdict::validate::Validation,
-    validation_svg: &str,
+    validation_svg: Option<&str>,
     log_name: &str,
     force_svg: &str,
     diagnosis_html: &str,
 ) -> String {
     let mut h = String::with_capacity(128 * 1024);
-    let verdict = crate::verdict::validate::verdict_word(v.pass, v.conclusive);
+    let verdict = crate::verdict::validate::verdict_word(v.pass, v.conclusive, v.judged);
     let _ = write!(
         h,
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\
@@ -440,7 +440,7 @@ pub fn validation_html(
          <h1>Validation of {log} {}</h1>\n\
          <p>Designed law: F(x) = {:.7} N &middot; exp({:.7} /mm &middot; x) + {:.7} N. \
          Identified from the log: F(x) = {:.7} N &middot; exp({:.7} /mm &middot; x) + {:.7} N. \
-         EKF k2 = {:.7} &plusmn; {:.7} /mm. Deflections in the log: {:.3} to {:.3} mm.</p>\n\
+         {} k2 = {:.7} &plusmn; {:.7} /mm. Deflections in the log: {:.3} to {:.3} mm.</p>\n\
          <h2>Criteria</h2>\n<table><tr><th>status</th><th>criterion</th><th>deviation</th>\
          <th>upper bound</th><th>tolerance</th><th>what</th></tr>\n",
         badge(verdict),
@@ -450,6 +450,11 @@ pub fn validation_html(
         v.identified.mu_n,
         v.identified.k2_per_mm,
         v.identified.f0_n,
+        if v.ekf_consistent {
+            "EKF"
+        } else {
+            "Identified (the filter did not run, or was not consistent on this log)"
+        },
         v.ekf_k2_per_mm,
         v.ekf_k2_per_mm_std,
         v.range_min_mm,
@@ -457,12 +462,15 @@ pub fn validation_html(
         log = escape(log_name),
     );
     criteria_rows(&mut h, &v.criteria);
-    h.push_str("<h2>Stiffness against force, and convergence</h2>\n");
-    h.push_str(&figure(
-        validation_svg,
-        "Left: EKF stiffness against spring force over the converged half of the run, with the \
-         designed line. Right: k2 against the design and M against its final value over time.",
-    ));
+    if let Some(svg) = validation_svg {
+        h.push_str("<h2>Stiffness against force, and convergence</h2>\n");
+        h.push_str(&figure(
+            svg,
+            "Left: EKF stiffness against spring force over the converged half of the run, with \
+             the designed line. Right: k2 against the design and M against its final value over \
+             time.",
+        ));
+    }
     h.push_str("<h2>Measured force against deflection</h2>\n");
     coverage_paragraph(&mut h, v.coverage.as_ref(), v.position_offset_mm);
     h.push_str(&figure(
@@ -508,7 +516,7 @@ pub fn curve_validation_html(
     diagnosis_html: &str,
 ) -> String {
     let mut h = String::with_capacity(64 * 1024);
-    let verdict = crate::verdict::validate::verdict_word(v.pass, v.conclusive);
+    let verdict = crate::verdict::validate::verdict_word(v.pass, v.conclusive, v.judged);
     let _ = write!(
         h,
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\

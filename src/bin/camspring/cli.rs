@@ -249,7 +249,8 @@ pub enum Command {
     },
     /// Check a built spring's calibration log against its design: one verdict.
     ///
-    /// Exit code 0 pass, 1 fail, 2 bad input. Writes validation.svg next to the log.
+    /// Exit code 0 pass (conclusive or not), 1 fail, 2 bad input or a log that judges nothing
+    /// ("NOT JUDGED"). Writes validation.svg next to the log.
     ///
     /// Examples:
     ///   camspring validate specs/paper.toml out/paper/calib.csv

@@ -588,7 +588,7 @@ fn main() -> ExitCode {
                     tolerance,
                     svg.as_deref(),
                 )?;
-                let code = if v.pass() { EXIT_OK } else { EXIT_CHECK_FAILED };
+                let code = v.exit_code();
                 let verdict = match &v {
                     Verdict::Law(v) => format_validation(v),
                     Verdict::Curve(v) => format_curve_validation(v),
