@@ -380,3 +380,62 @@ fn estimate_reports_its_twins_and_refuses_too_many() {
         "{stderr}"
     );
 }
+
+/// `estimate --init SPEC` on a heavy transmission (m 0.25 N s^2/mm, d1 1.5 N s/mm, d2 -0.008
+/// N s^3/mm^3, sines at half speed): the spring starts from the designed law, and the
+/// dynamics from identifying the log. Started with the dynamics wide open (m 0.01, d1 0.05),
+/// the filter ended with k2 at z +43 and m 0.038 against 0.25, and called itself consistent.
+#[test]
+fn estimate_from_the_designed_law_is_right_within_its_deviations_on_a_heavy_transmission() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let paper = spec_path("paper.toml");
+    let args = [
+        "simulate",
+        &paper,
+        "-o",
+        "calib.csv",
+        "--seed",
+        "5",
+        "--m",
+        "0.25",
+        "--d1",
+        "1.5",
+        "--d2",
+        "-0.008",
+        "--speed",
+        "0.5",
+    ];
+    assert_eq!(camspring(d, &args).status.code(), Some(0));
+    let out = camspring(
+        d,
+        &[
+            "estimate",
+            "calib.csv",
+            "--init",
+            &paper,
+            "--json",
+            "-o",
+            "est.csv",
+        ],
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(out.status.code(), Some(0), "{v}");
+    assert_eq!(v["consistency"]["consistent"], true, "{v}");
+    let law = common::paper_law();
+    let f = &v["final"];
+    for (key, truth) in [
+        ("k2_per_mm", law.k2_per_mm),
+        ("f0_n", law.f0_n),
+        ("m_n_s2_per_mm", 0.25),
+    ] {
+        let (value, std) = (
+            f[key].as_f64().unwrap(),
+            f[&format!("{key}_std")].as_f64().unwrap(),
+        );
+        assert!(
+            ((value - truth) / std).abs() < 3.0,
+            "{key}: {value} +- {std} against {truth}"
+        );
+    }
+}

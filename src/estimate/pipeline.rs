@@ -816,7 +816,26 @@ where
                 stroke,
             )
         }
-        EstimateInit::Law { law, xmax_mm } => (EkfInit::from_law(law), None, *xmax_mm),
+        EstimateInit::Law { law, xmax_mm } => {
+            // The spring starts from the designed law; the dynamics, the friction stage and
+            // the consistency checks still come from identifying the log. With the dynamics
+            // wide open instead (m 0.01, d1 0.05), the filter ended far from the truth and
+            // called itself consistent, with nothing to compare with: on an independent rig's
+            // heavy transmission (m 0.25, d1 1.5) M at z -6254 and F0 at z -52; on the
+            // default one F0 at z +38 (2026-11-27). A log identification cannot fit starts
+            // as before, with the dynamics wide open.
+            match identify_reduced(reduced, noise, opts.window_s) {
+                Ok(id) => {
+                    let mut init = EkfInit::from_identification(&id, noise.force_variance_n2);
+                    let spring = EkfInit::from_law(law);
+                    init.k2_per_mm = spring.k2_per_mm;
+                    init.mu_n = spring.mu_n;
+                    init.f0_n = spring.f0_n;
+                    (init, Some(id), *xmax_mm)
+                }
+                Err(_) => (EkfInit::from_law(law), None, *xmax_mm),
+            }
+        }
     };
     let dt = survey.dt_s;
     // The inertia's floor keeps the prediction stable: RK4 needs D dt / M and
