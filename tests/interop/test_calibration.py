@@ -488,9 +488,9 @@ def test_a_spring_identification_does_not_resolve_gets_no_filter_and_no_force_ve
         cov = next(c for c in v["criteria"] if c["name"] == "coverage")
         assert 65 < cov["deviation_percent"] < 70 and cov["tolerance_percent"] == 50, cov
         assert v["coverage"]["stroke_fraction"] < 0.35 and v["coverage"]["warnings"], v["coverage"]
-        text = camspring("validate", tmp_path / f"s{k2_scale}.toml", log, "--tolerance", "3%")
-        assert text.returncode == 2 and text.stdout.startswith("NOT JUDGED"), text.stdout
-        assert "k2 is not resolved by this log" in text.stdout, text.stdout
+    text = camspring("validate", tmp_path / "s1.0.toml", log, "--tolerance", "3%")
+    assert text.returncode == 2 and text.stdout.startswith("NOT JUDGED"), text.stdout
+    assert "k2 is not resolved by this log" in text.stdout, text.stdout
 
 
 def test_the_diagnosis_damper_is_not_pulled_along_its_line_by_the_velocitys_noise(tmp_path):

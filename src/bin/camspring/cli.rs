@@ -24,7 +24,7 @@ use camspring::units::{parse_duration_s, parse_fraction, parse_rate_hz};
   camspring sweep my.toml --vary spring_rate=2..20 --vary preload=0..10
   camspring simulate -o calib.csv && camspring validate specs/paper.toml calib.csv
 
-Exit codes: 0 done, 1 a check or the validation failed, 2 bad input, 3 an output could not be written.
+Exit codes: 0 done, 1 a check or the validation failed, 2 bad input (or a log that validate cannot judge), 3 an output could not be written.
 More: README.md, docs/SPEC.md, docs/CALIBRATION.md, docs/JSON.md, `camspring <command> --help`."
 )]
 pub struct Cli {
