@@ -548,3 +548,26 @@ def test_validate_passes_the_true_law_on_sweep_draws_84_and_86(tmp_path, i):
     assert abs(d0 - tr.d0) < 3.0 * d0_std, (d0, d0_std, tr.d0)
     rc, wrong = validate_json(tmp_path, tr, log, 1.05)
     assert not (wrong["pass"] and wrong["conclusive"]), wrong["criteria"]
+
+
+def test_a_log_over_less_than_half_the_stroke_passes_only_as_not_conclusive_and_still_fails_a_wrong_law(tmp_path):
+    """The heaviest row's force-controlled run, seed 3 (friction 4 N): the commanded force
+    moves the rod over 7.3 to 14.5 mm of the 15 mm stroke, 48 %, and 35 to 92 % of Fmax. Every
+    force criterion passed (force_rms 0.17 %) and the true law failed, on coverage alone, until
+    2026-11-27. The unlogged stroke is now not judged: the true law passes, not conclusive,
+    and k2 5 % high still fails on what the log covers (force_rms 9.1 %)."""
+    tr = MATRIX_ROWS["heaviest"]
+    t, f, x, _ = run(tr, Rig(seed=3), "force", 300.0)
+    log = tmp_path / "heaviest-force-3.tsv"
+    write_rig_log(log, t, f, x, style="tab")
+    rc, v = validate_json(tmp_path, tr, log, 1.0)
+    assert rc == 0 and v["pass"] and v["judged"] and not v["conclusive"], v["criteria"]
+    c = {c["name"]: c for c in v["criteria"]}
+    assert 50 < c["coverage"]["deviation_percent"] == c["coverage"]["deviation_upper_percent"] < 55, c["coverage"]
+    assert c["force_rms"]["pass"] and c["force_max"]["pass"], v["criteria"]
+    assert 0.45 < v["coverage"]["stroke_fraction"] < 0.5, v["coverage"]
+    assert any("not judged" in w for w in v["coverage"]["warnings"]), v["coverage"]
+    rc, off = validate_json(tmp_path, tr, log, 1.05)
+    assert rc == 1 and not off["pass"], off["criteria"]
+    failed = {c["name"] for c in off["criteria"] if not c["pass"]}
+    assert "force_rms" in failed and "coverage" not in failed, off["criteria"]
