@@ -439,3 +439,49 @@ fn estimate_from_the_designed_law_is_right_within_its_deviations_on_a_heavy_tran
         );
     }
 }
+
+/// `estimate --init SPEC` on a log at rest (the rod held at 8 mm, the sensors' noise only):
+/// identification cannot fit it, the filter runs from the designed law with nothing to check
+/// it against, and says so (exit 1, not consistent). It reported such a run as consistent,
+/// exit 0.
+#[test]
+fn estimate_from_the_designed_law_says_when_nothing_checks_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let law = common::paper_law();
+    let mut text = String::from("t_s,force_n,position_mm\n");
+    // White noise from a xorshift generator, uniform in -1 ... 1: about 0.03 mm and 0.1 N.
+    let mut state = 0x2545_f491_4f6c_dd1d_u64;
+    let mut uniform = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        2.0 * (state >> 11) as f64 / (1u64 << 53) as f64 - 1.0
+    };
+    for i in 0..6000 {
+        let (a, b) = (uniform(), uniform());
+        let x = 8.0 + 0.05 * a;
+        text.push_str(&format!(
+            "{:.3},{:.5},{:.5}\n",
+            i as f64 * 0.01,
+            law.force_n(8.0) + 0.1 * b,
+            x
+        ));
+    }
+    std::fs::write(d.join("rest.csv"), text).unwrap();
+    let paper = spec_path("paper.toml");
+    let out = camspring(
+        d,
+        &[
+            "estimate", "rest.csv", "--init", &paper, "--json", "-o", "est.csv",
+        ],
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(out.status.code(), Some(1), "{v}");
+    assert_eq!(v["consistency"]["consistent"], false, "{v}");
+    let reasons = v["consistency"]["reasons"].to_string();
+    assert!(
+        reasons.contains("identification does not fit this log") && reasons.contains("excite"),
+        "{reasons}"
+    );
+}

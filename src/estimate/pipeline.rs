@@ -800,6 +800,8 @@ where
         &survey.reduced
     };
     let (lo, hi) = survey.position_range_mm;
+    // Why the filter has nothing to be checked against, when it has not.
+    let mut unchecked = None;
     let (mut init, identification, stroke) = match &opts.init {
         EstimateInit::Identify => {
             let id = identify_reduced(reduced, noise, opts.window_s)?;
@@ -833,7 +835,14 @@ where
                     init.f0_n = spring.f0_n;
                     (init, Some(id), *xmax_mm)
                 }
-                Err(_) => (EkfInit::from_law(law), None, *xmax_mm),
+                Err(e) => {
+                    unchecked = Some(format!(
+                        "identification does not fit this log ({e}), so the filter started \
+                         from the designed law with the dynamics wide open and nothing checks \
+                         it against the log; record a run identify fits"
+                    ));
+                    (EkfInit::from_law(law), None, *xmax_mm)
+                }
             }
         }
     };
@@ -1078,9 +1087,13 @@ where
         }
         _ => None,
     };
-    let consistency = Consistency::new(&run, identification.as_ref(), stiffness_path, |k| {
+    let mut consistency = Consistency::new(&run, identification.as_ref(), stiffness_path, |k| {
         settings.holds(k)
     });
+    if let Some(why) = unchecked {
+        consistency.consistent = false;
+        consistency.reasons.push(why);
+    }
     let std_before_disagreement = run.last.std();
     if let Some(id) = &identification {
         widen_to_disagreement(&mut run, id);
