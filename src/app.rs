@@ -841,9 +841,16 @@ pub fn run_validate(
     let diagnosis_html = diagnosis.as_ref().map_or(String::new(), |d| {
         crate::render::html::diagnosis_section(d, &crate::render::calibration::diagnosis_svg(d))
     });
-    // Every verdict also states, and judges, what part of the designed stroke the log covers.
-    let judge_coverage = |lo: f64, hi: f64| {
-        crate::verdict::validate::coverage(&designed, lo, hi, spec.law.xmax_mm())
+    // Every verdict also states, and judges, what part of the designed stroke the log covers;
+    // then its pass, conclusive and judged flags are settled over all its criteria.
+    let judge_coverage = |criteria: &mut Vec<crate::verdict::validate::Criterion>,
+                          all_pass: bool,
+                          lo: f64,
+                          hi: f64| {
+        let (c, cov) = crate::verdict::validate::coverage(&designed, lo, hi, spec.law.xmax_mm());
+        let all_pass = all_pass && c.pass;
+        criteria.push(c);
+        (crate::verdict::validate::settle(criteria, all_pass), cov)
     };
     let (verdict, svg_text, html) = match &designed {
         ForceLaw::Exponential(law) => {
@@ -919,11 +926,9 @@ pub fn run_validate(
             if judge_strokes(&mut v.criteria, &mut v.band_exits) {
                 v.pass = v.criteria.iter().all(|c| c.pass);
             }
-            let (c, cov) = judge_coverage(v.range_min_mm, v.range_max_mm);
-            let all_pass = v.pass && c.pass;
-            v.criteria.push(c);
-            (v.pass, v.conclusive, v.judged) =
-                crate::verdict::validate::settle(&v.criteria, all_pass);
+            let cov;
+            ((v.pass, v.conclusive, v.judged), cov) =
+                judge_coverage(&mut v.criteria, v.pass, v.range_min_mm, v.range_max_mm);
             v.coverage = Some(cov);
             v.diagnosis = diagnosis.clone();
             // The measured force-deflection points come from the quasi-static curve.
@@ -953,11 +958,9 @@ pub fn run_validate(
             if judge_strokes(&mut v.criteria, &mut v.band_exits) {
                 v.pass = !v.bins.is_empty() && v.criteria.iter().all(|c| c.pass);
             }
-            let (c, cov) = judge_coverage(v.range_min_mm, v.range_max_mm);
-            let all_pass = v.pass && c.pass;
-            v.criteria.push(c);
-            (v.pass, v.conclusive, v.judged) =
-                crate::verdict::validate::settle(&v.criteria, all_pass);
+            let cov;
+            ((v.pass, v.conclusive, v.judged), cov) =
+                judge_coverage(&mut v.criteria, v.pass, v.range_min_mm, v.range_max_mm);
             v.coverage = Some(cov);
             v.diagnosis = diagnosis.clone();
             let svg_text = curve_validation_svg(&v);
