@@ -313,7 +313,7 @@ pub fn read_log_file(
         b.finish_and_clear();
     }
     let log = result.map_err(|e| log_error(path, e))?;
-    if let Some(w) = filled_warning(&log.filled) {
+    if let Some(w) = filled_warning(&log.filled, &log.left_out.0, log.left_out.1) {
         eprintln!("warning: {}: {w}", path.display());
     }
     Ok(log)
@@ -330,28 +330,49 @@ fn reading_bar(path: &Path, size: u64) -> Option<indicatif::ProgressBar> {
     Some(bar)
 }
 
-/// The warning for dropped samples that the reader filled, listing them (the first ten).
-pub fn filled_warning(filled: &[crate::estimate::log::FilledGap]) -> Option<String> {
-    if filled.is_empty() {
-        return None;
+/// The warning for dropped samples that the reader filled, listing them (the first ten), and
+/// for rows with no value it left out at the log's start or end (`left_out` lists the first of
+/// the `left_out_count`).
+pub fn filled_warning(
+    filled: &[crate::estimate::log::FilledGap],
+    left_out: &[u64],
+    left_out_count: usize,
+) -> Option<String> {
+    let mut parts = Vec::new();
+    if !filled.is_empty() {
+        let total: usize = filled.iter().map(|g| g.samples).sum();
+        let list: Vec<String> = filled
+            .iter()
+            .take(10)
+            .map(|g| {
+                let empty = match g.empty_rows {
+                    0 => String::new(),
+                    1 => ", a row with no value".to_string(),
+                    k => format!(", {k} rows with no value"),
+                };
+                format!(
+                    "{} before line {} (after t = {} s{empty})",
+                    g.samples, g.line, g.after_s
+                )
+            })
+            .collect();
+        parts.push(format!(
+            "{total} dropped sample(s) in {} gap(s) filled by linear interpolation: {}{}",
+            filled.len(),
+            list.join(", "),
+            if filled.len() > 10 { ", ..." } else { "" }
+        ));
     }
-    let total: usize = filled.iter().map(|g| g.samples).sum();
-    let list: Vec<String> = filled
-        .iter()
-        .take(10)
-        .map(|g| {
-            format!(
-                "{} before line {} (after t = {} s)",
-                g.samples, g.line, g.after_s
-            )
-        })
-        .collect();
-    Some(format!(
-        "{total} dropped sample(s) in {} gap(s) filled by linear interpolation: {}{}",
-        filled.len(),
-        list.join(", "),
-        if filled.len() > 10 { ", ..." } else { "" }
-    ))
+    if left_out_count > 0 {
+        let lines: Vec<String> = left_out.iter().take(10).map(u64::to_string).collect();
+        parts.push(format!(
+            "{left_out_count} row(s) with no value (empty or NaN) at the start or end of the log \
+             left out: line(s) {}{}",
+            lines.join(", "),
+            if left_out_count > 10 { ", ..." } else { "" }
+        ));
+    }
+    (!parts.is_empty()).then(|| parts.join("; "))
 }
 
 /// What `camspring noise` found and wrote.
@@ -645,7 +666,7 @@ pub fn survey_log_file(
         b.finish_and_clear();
     }
     let surveyed = surveyed.map_err(|e| log_error(log_path, e))?;
-    if let Some(w) = filled_warning(reader.filled()) {
+    if let Some(w) = filled_warning(reader.filled(), reader.left_out(), reader.left_out_count()) {
         eprintln!("warning: {}: {w}", log_path.display());
     }
     Ok(surveyed)

@@ -151,13 +151,218 @@ fn isolated_dropped_samples_are_filled_and_long_gaps_refused_with_their_times() 
 }
 
 #[test]
+fn readings_a_logger_wrote_as_nan_or_empty_are_dropped_samples() {
+    let text = base_log();
+    let reference = read(&text).unwrap();
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let field = |l: &str, k: usize| l.split(',').nth(k).unwrap().to_string();
+    // Data row 100 (line 101) with the force as NaN; data row 2000 with both values empty;
+    // the first data row with no position; the last with NaN time (`-nan`, as C's printf).
+    lines[101] = format!("{},NaN,{}", field(&lines[101], 0), field(&lines[101], 2));
+    lines[2001] = format!("{},,", field(&lines[2001], 0));
+    lines[1] = format!("{},{},n/a", field(&lines[1], 0), field(&lines[1], 1));
+    let last = lines.len() - 1;
+    lines[last] = format!("-nan,{},{}", field(&lines[last], 1), field(&lines[last], 2));
+    let log = read(&(lines.join("\n") + "\n")).unwrap();
+    // The first and last rows are left out (nothing to interpolate from), the others filled.
+    assert_eq!(log.len(), reference.len() - 2);
+    assert_eq!(log.left_out, (vec![2, reference.len() as u64 + 1], 2));
+    assert_eq!(
+        log.filled
+            .iter()
+            .map(|g| (g.line, g.samples, g.empty_rows))
+            .collect::<Vec<_>>(),
+        vec![(103, 1, 1), (2003, 1, 1)]
+    );
+    // Row 100 is now sample 99: its time is the grid's, its force the neighbours' mean.
+    let (i, r) = (99, 100);
+    assert!((log.t_s[i] - reference.t_s[r]).abs() < 1e-9);
+    let mid = 0.5 * (reference.force_n[r - 1] + reference.force_n[r + 1]);
+    assert!((log.force_n[i] - mid).abs() < 1e-9);
+    assert!((log.position_mm[i] - reference.position_mm[r]).abs() < 0.05);
+    // Five NaN rows in a row are a gap too long to fill, named with its line.
+    let mut long = text.lines().map(str::to_string).collect::<Vec<_>>();
+    for row in &mut long[301..=305] {
+        *row = format!("{},NaN,NaN", field(row, 0));
+    }
+    let err = read(&(long.join("\n") + "\n")).unwrap_err();
+    let msg = err.to_string();
+    assert!(
+        msg.contains("line 307")
+            && msg.contains("5 samples missing")
+            && msg.contains("5 of them rows with no value"),
+        "{msg}"
+    );
+    // A column with no value anywhere is named, not reported as a log too short.
+    let empty: Vec<String> = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| {
+            if i == 0 {
+                l.to_string()
+            } else {
+                format!("{},{},", field(l, 0), field(l, 1))
+            }
+        })
+        .collect();
+    let err = read(&(empty.join("\n") + "\n")).unwrap_err();
+    assert!(
+        matches!(&err, LogError::NoValues { line: 2, column, .. } if column == "position_mm"),
+        "{err}"
+    );
+}
+
+#[test]
+fn decimal_commas_are_read_where_the_separator_is_not_a_comma() {
+    let text = base_log();
+    let reference = read(&text).unwrap();
+    // A logger set to a German locale: semicolons between fields, commas for decimals.
+    let german = text.replace(',', ";").replace('.', ",");
+    let log = read(&german).unwrap();
+    assert_eq!(log.t_s, reference.t_s);
+    assert_eq!(log.force_n, reference.force_n);
+    assert_eq!(log.position_mm, reference.position_mm);
+    // Where the separator is a comma, "12,5" is two fields, never a number.
+    let err = read(&text.replacen("\n0.", "\n0,", 1))
+        .map(|_| ())
+        .unwrap_err();
+    assert_eq!(err.line(), Some(2), "{err}");
+    assert!(err.to_string().contains("decimal comma"), "{err}");
+}
+
+#[test]
+fn a_time_column_written_as_clock_time_is_read_as_seconds_from_the_first_row() {
+    let text = base_log();
+    let reference = read(&text).unwrap();
+    let body: Vec<(f64, &str)> = text
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let (t, rest) = l.split_once(',').unwrap();
+            (t.parse::<f64>().unwrap(), rest)
+        })
+        .collect();
+    // The clock at the first row, as (hours, minutes, seconds), and the row's clock text.
+    let clock = |start: f64, t: f64| {
+        let s = start + t;
+        let (h, m) = ((s / 3600.0).floor(), ((s % 3600.0) / 60.0).floor());
+        (h as u64 % 24, m as u64, s % 60.0)
+    };
+    type Form = fn(u64, u64, f64) -> String;
+    let forms: [(&str, f64, Form); 3] = [
+        // ISO 8601 with a T, starting just before midnight: the date rolls over.
+        ("iso", 86_340.0, |h, m, s| {
+            format!("2026-11-26T{h:02}:{m:02}:{s:06.3}")
+        }),
+        // A date and time with a UTC offset, as RFC 3339 gives it.
+        ("offset", 30_000.0, |h, m, s| {
+            format!("2026-11-27T{h:02}:{m:02}:{s:06.3}+01:00")
+        }),
+        // A time of day only, passing midnight.
+        ("time of day", 86_340.0, |h, m, s| {
+            format!("{h:02}:{m:02}:{s:06.3}")
+        }),
+    ];
+    for (name, start, form) in forms {
+        let mut log = String::from("t_s,force_n,position_mm\n");
+        for &(t, rest) in &body {
+            let (h, m, s) = clock(start, t);
+            // Past midnight the ISO date is the next day's.
+            let line = form(h, m, s);
+            let line = if name == "iso" && start + t >= 86_400.0 {
+                line.replace("2026-11-26", "2026-11-27")
+            } else {
+                line
+            };
+            log.push_str(&format!("{line},{rest}\n"));
+        }
+        let read_back = read(&log).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(read_back.len(), reference.len(), "{name}");
+        let worst = read_back
+            .t_s
+            .iter()
+            .zip(&reference.t_s)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        // Written to the millisecond.
+        assert!(worst < 6e-4, "{name}: {worst} s");
+        assert_eq!(read_back.force_n, reference.force_n, "{name}");
+    }
+    // A clock that is not one is named with its line.
+    let bad = text.replacen("\n0.010000,", "\n25:61:00,", 1);
+    let err = read(&bad).unwrap_err();
+    assert_eq!(err.line(), Some(3), "{err}");
+    assert!(
+        err.to_string()
+            .contains("\"25:61:00\": expected a finite number or a clock time"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_missing_column_message_gives_the_option_for_the_column_that_reads_as_it() {
+    let text = base_log();
+    let body = text.split_once('\n').unwrap().1;
+    let err = read(&format!("Time [ms],Force (N),x_in\n{body}"))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("--time \"Time [ms]:ms\""), "{err}");
+    let err = read(&format!("t_s,load,x_in\n{body}"))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("--force \"load:UNIT\""), "{err}");
+    let err = read(&format!("t_s,force_n,x_in\n{body}"))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("--position \"x_in:in\""), "{err}");
+    // The options the hint gives read the log: time in ms, position in inches.
+    let scaled: String = body
+        .lines()
+        .map(|l| {
+            let v: Vec<f64> = l.split(',').map(|f| f.parse().unwrap()).collect();
+            format!("{},{},{}\n", v[0] * 1000.0, v[1], v[2] / 25.4)
+        })
+        .collect();
+    let map = ColumnMap {
+        time: camspring::estimate::log::parse_time_column("Time [ms]:ms").unwrap(),
+        force: camspring::estimate::log::parse_column(
+            "Force (N):N",
+            camspring::units::Dimension::Force,
+            "force",
+        )
+        .unwrap(),
+        position: camspring::estimate::log::parse_column(
+            "x_in:in",
+            camspring::units::Dimension::Length,
+            "position",
+        )
+        .unwrap(),
+        ..ColumnMap::default()
+    };
+    let log = read_log(
+        format!("Time [ms],Force (N),x_in\n{scaled}").as_bytes(),
+        &map,
+        0.1,
+        |_| {},
+    )
+    .unwrap();
+    let reference = read(&text).unwrap();
+    assert!((log.t_s[500] - reference.t_s[500]).abs() < 1e-9);
+    assert!((log.position_mm[500] - reference.position_mm[500]).abs() < 1e-6);
+}
+
+#[test]
 fn the_cli_reads_a_rig_log_and_warns_about_what_it_filled() {
     let dir = tempfile::tempdir().unwrap();
     let text = base_log();
     let lines: Vec<&str> = text.lines().collect();
     let mut rig = String::from("# exported by RigLogger 4.2\n");
     for (i, l) in lines.iter().enumerate() {
-        if i != 700 {
+        if i == 900 {
+            // A reading the logger lost, written as NaN.
+            let t = l.split(',').next().unwrap();
+            rig.push_str(&format!("{t};NaN;NaN\n"));
+        } else if i != 700 {
             rig.push_str(&l.replace(',', ";"));
             rig.push('\n');
         }
@@ -167,7 +372,9 @@ fn the_cli_reads_a_rig_log_and_warns_about_what_it_filled() {
     assert_eq!(out.status.code(), Some(0));
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
-        stderr.contains("1 dropped sample(s)") && stderr.contains("before line 702"),
+        stderr.contains("2 dropped sample(s)")
+            && stderr.contains("1 before line 702 (after t =")
+            && stderr.contains("1 before line 902 (after t = 8.98 s, a row with no value)"),
         "{stderr}"
     );
 }

@@ -4,9 +4,11 @@
 //! [`ColumnMap`] (`--time t --force F:lbf --position x:in`). [`LogReader`] streams the file
 //! sample by sample in constant memory (what `identify` and `estimate` use); [`read_log`]
 //! collects it into a [`CalibrationLog`].
-//! Every error names the line and what was expected: a malformed or non-finite number, a
+//! Every error names the line and what was expected: a malformed or infinite number, a
 //! missing column, time that does not increase, or a sampling interval that differs from the
-//! first one by more than the stated tolerance (a gap or irregular sampling).
+//! first one by more than the stated tolerance (a gap or irregular sampling). A field that is
+//! empty or NaN is a reading the logger lost, filled like a dropped sample; where the separator
+//! is not a comma, decimal commas are read; a time column may hold clock time.
 
 use std::io::Read;
 
@@ -126,6 +128,29 @@ pub struct FilledGap {
     pub after_s: f64,
     /// Samples filled.
     pub samples: usize,
+    /// How many of them the log has as rows with no value (an empty field or NaN) rather
+    /// than as missing rows.
+    pub empty_rows: usize,
+}
+
+/// Whether a field holds no reading: empty, or NaN as loggers write it (`NaN`, `nan`, `-nan`,
+/// `NA`, `N/A`, `null`). Such a row is a dropped sample, like a missing row.
+pub fn is_no_value(text: &str) -> bool {
+    const TOKENS: [&str; 7] = ["", "nan", "-nan", "+nan", "na", "n/a", "null"];
+    TOKENS.iter().any(|t| text.eq_ignore_ascii_case(t))
+}
+
+/// Parses a log's number. Where the separator is not a comma, a decimal comma (`12,5`, as
+/// loggers set to a European locale write) is read as a decimal point.
+fn parse_number(text: &str, delimiter: u8) -> Option<f64> {
+    let value = match text.parse::<f64>() {
+        Ok(v) => v,
+        Err(_) if delimiter != b',' && text.matches(',').count() == 1 && !text.contains('.') => {
+            text.replace(',', ".").parse::<f64>().ok()?
+        }
+        Err(_) => return None,
+    };
+    value.is_finite().then_some(value)
 }
 
 /// The most consecutive dropped samples [`read_log`] fills by interpolation; a longer gap is
@@ -166,6 +191,71 @@ fn split_column<'a>(text: &'a str, what: &str) -> Result<(&'a str, Option<&'a st
     Ok((name, unit))
 }
 
+/// The unit a column name carries for a dimension (`t_ms`, `Force [N]`, `x (in)`), in the
+/// spelling the column options take; case is ignored where that leaves one unit.
+fn unit_in_name(tokens: &[&str], dim: Dimension) -> Option<&'static str> {
+    tokens.iter().rev().find_map(|t| {
+        let units = dim.units();
+        units
+            .iter()
+            .find(|(u, _)| u == t)
+            .map(|(u, _)| *u)
+            .or_else(|| {
+                let same: Vec<&str> = units
+                    .iter()
+                    .filter(|(u, _)| u.eq_ignore_ascii_case(t))
+                    .map(|(u, _)| *u)
+                    .collect();
+                (same.len() == 1).then(|| same[0])
+            })
+    })
+}
+
+/// A hint for a missing column: the header's column whose name reads as the quantity (`time`,
+/// `Force [N]`, `x_in`), and the option that maps it, with the unit its name carries.
+fn column_hint(what: &str, columns: &[String]) -> String {
+    let (dim, words): (Dimension, &[&str]) = match what {
+        "time" => (Dimension::Time, &["t", "time", "timestamp", "elapsed"]),
+        "force" => (Dimension::Force, &["f", "force", "load", "fz"]),
+        _ => (
+            Dimension::Length,
+            &[
+                "x",
+                "pos",
+                "position",
+                "displacement",
+                "deflection",
+                "stroke",
+                "travel",
+            ],
+        ),
+    };
+    let matching: Vec<(&String, Option<&str>)> = columns
+        .iter()
+        .filter(|c| !c.contains(':'))
+        .filter_map(|c| {
+            let tokens: Vec<&str> = c
+                .split(|ch: char| " _-[]()".contains(ch))
+                .filter(|t| !t.is_empty())
+                .collect();
+            let first = tokens.first()?.to_ascii_lowercase();
+            words
+                .contains(&first.as_str())
+                .then(|| (c, unit_in_name(&tokens[1..], dim)))
+        })
+        .collect();
+    match matching.as_slice() {
+        [(name, Some(unit))] => {
+            format!("; \"{name}\" reads as the {what} in {unit}: give --{what} \"{name}:{unit}\"")
+        }
+        [(name, None)] => format!(
+            "; \"{name}\" reads as the {what}: give --{what} \"{name}:UNIT\" with its unit ({})",
+            dim.unit_list()
+        ),
+        _ => format!("; give --{what} NAME:UNIT to map the {what} column"),
+    }
+}
+
 /// Parses a `name` or `name:unit` column option for a dimension.
 pub fn parse_column(text: &str, dim: Dimension, what: &str) -> Result<Column, LogError> {
     let (name, unit) = split_column(text, what)?;
@@ -202,7 +292,7 @@ pub enum LogError {
         if header.contains(name.as_str()) && !columns.iter().any(|c| c == name) {
             format!("; the header line contains \"{name}\" but not as a field of its own: give --delimiter comma, tab or semicolon")
         } else {
-            String::new()
+            column_hint(what, columns)
         }
     )]
     MissingColumn {
@@ -225,7 +315,7 @@ pub enum LogError {
         "the log has {} gap(s) longer than {MAX_FILLED_SAMPLES} samples, which are not filled: {}; \
          expected an evenly sampled log with at most {MAX_FILLED_SAMPLES} dropped samples in a row",
         gaps.len(),
-        gaps.iter().take(10).map(|g| format!("line {} ({} samples missing after t = {} s)", g.line, g.samples, g.after_s)).collect::<Vec<_>>().join(", ")
+        gaps.iter().take(10).map(|g| format!("line {} ({} samples missing after t = {} s{})", g.line, g.samples, g.after_s, if g.empty_rows > 0 { format!(", {} of them rows with no value", g.empty_rows) } else { String::new() })).collect::<Vec<_>>().join(", ")
     )]
     Gaps {
         /// The gaps (at most the first 100).
@@ -233,9 +323,10 @@ pub enum LogError {
     },
     /// Produced by [`read_log`] for a value that is not a finite number.
     #[error(
-        "line {line}: column {} = {}: expected a finite number",
+        "line {line}: column {} = {}: expected a finite number{}",
         quoted(column),
-        quoted(found)
+        quoted(found),
+        if *time { " or a clock time (2026-11-27T08:35:31.120, or 08:35:31.120)" } else { "" }
     )]
     BadNumber {
         /// 1-based line.
@@ -244,6 +335,8 @@ pub enum LogError {
         column: String,
         /// The text found.
         found: String,
+        /// Whether it is the time column, which may also hold clock time.
+        time: bool,
     },
     /// Produced by [`read_log`] for a value that leaves the physical range after conversion to
     /// N or mm (or overflows).
@@ -292,6 +385,20 @@ pub enum LogError {
         /// Fields in the header.
         expected: usize,
     },
+    /// Produced by [`read_log`] for a row with more fields than the header.
+    #[error(
+        "line {line}: {found} fields, expected {expected} as in the header (a decimal comma in a \
+         comma-separated log splits each number in two: write decimal points, or separate the \
+         fields with semicolons or tabs)"
+    )]
+    LongRow {
+        /// 1-based line.
+        line: u64,
+        /// Fields found.
+        found: usize,
+        /// Fields in the header.
+        expected: usize,
+    },
     /// Produced by [`read_log`] when time does not increase.
     #[error("line {line}: time {t_s} s does not increase (previous sample at {previous_s} s)")]
     TimeNotIncreasing {
@@ -317,6 +424,21 @@ pub enum LogError {
         /// Tolerance.
         tolerance_percent: f64,
     },
+    /// Produced by [`read_log`] when too few rows have all three values.
+    #[error(
+        "line {line}: column {} has no value (empty or NaN), as have {rows} row(s) in all; \
+         expected a number in each of the time, force and position columns on at least \
+         {MIN_LOG_SAMPLES} rows",
+        quoted(column)
+    )]
+    NoValues {
+        /// The first row with no value.
+        line: u64,
+        /// Its column.
+        column: String,
+        /// Rows with no value that were left out.
+        rows: usize,
+    },
     /// Produced by [`read_log`] for logs too short to use.
     #[error("the log has {found} samples; at least {needed} are needed")]
     TooShort {
@@ -336,11 +458,13 @@ impl LogError {
         match self {
             LogError::BadNumber { line, .. }
             | LogError::ShortRow { line, .. }
+            | LogError::LongRow { line, .. }
             | LogError::TimeNotIncreasing { line, .. }
             | LogError::Irregular { line, .. }
             | LogError::OutOfRange { line, .. }
             | LogError::DuplicateColumn { line, .. }
-            | LogError::MissingColumn { line, .. } => Some(*line),
+            | LogError::MissingColumn { line, .. }
+            | LogError::NoValues { line, .. } => Some(*line),
             LogError::Gaps { gaps } => gaps.first().map(|g| g.line),
             _ => None,
         }
@@ -363,6 +487,10 @@ pub struct CalibrationLog {
     /// Dropped samples that the reader filled by interpolation (a warning for the user).
     #[serde(skip)]
     pub filled: Vec<FilledGap>,
+    /// Rows with no value that could not be filled (at the log's start or end), as
+    /// [`LogReader::left_out`] and [`LogReader::left_out_count`] give them.
+    #[serde(skip)]
+    pub left_out: (Vec<u64>, usize),
 }
 
 impl CalibrationLog {
@@ -410,6 +538,66 @@ pub struct Sample {
     pub position_mm: f64,
 }
 
+/// A time column written as clock time, read as seconds from the first row's: a date and time
+/// (`2026-11-27T08:35:31.120`, `2026-11-27 08:35:31.120`, `2026/11/27 08:35:31.120`, with an
+/// optional UTC offset as RFC 3339 gives it), or a time of day (`08:35:31.120`) that may pass
+/// midnight.
+#[derive(Debug, Default)]
+struct Clock {
+    /// The first row's clock.
+    origin: Option<chrono::NaiveDateTime>,
+    /// Whole days a time of day has wrapped past midnight.
+    days: i64,
+    /// The last time of day read (s after midnight).
+    last_of_day: Option<f64>,
+}
+
+impl Clock {
+    /// Seconds from the first row's clock, or None when `text` is not a clock.
+    fn seconds(&mut self, text: &str, delimiter: u8) -> Option<f64> {
+        use chrono::{NaiveDate, NaiveDateTime, NaiveTime, Timelike};
+        // ISO 8601 allows a decimal comma before the fraction of a second.
+        let text = if delimiter != b',' {
+            std::borrow::Cow::Owned(text.replace(',', "."))
+        } else {
+            std::borrow::Cow::Borrowed(text)
+        };
+        let date_time = chrono::DateTime::parse_from_rfc3339(&text)
+            .map(|d| d.naive_utc())
+            .ok()
+            .or_else(|| {
+                [
+                    "%Y-%m-%dT%H:%M:%S%.f",
+                    "%Y-%m-%d %H:%M:%S%.f",
+                    "%Y/%m/%d %H:%M:%S%.f",
+                ]
+                .iter()
+                .find_map(|f| NaiveDateTime::parse_from_str(&text, f).ok())
+            });
+        let at = match date_time {
+            Some(d) => d,
+            None => {
+                let time = NaiveTime::parse_from_str(&text, "%H:%M:%S%.f").ok()?;
+                let of_day = f64::from(time.num_seconds_from_midnight())
+                    + f64::from(time.nanosecond()) * 1e-9;
+                // A time of day that falls by more than half a day has passed midnight.
+                if self
+                    .last_of_day
+                    .is_some_and(|last| of_day < last - 43_200.0)
+                {
+                    self.days += 1;
+                }
+                self.last_of_day = Some(of_day);
+                NaiveDate::from_ymd_opt(1970, 1, 1)?.and_time(time)
+                    + chrono::Duration::days(self.days)
+            }
+        };
+        let origin = *self.origin.get_or_insert(at);
+        let since = at - origin;
+        Some(since.num_seconds() as f64 + f64::from(since.subsec_nanos()) * 1e-9)
+    }
+}
+
 /// The source of the CSV records: the header line, then the rest with comments blanked.
 type Records<R> =
     csv::Reader<std::io::Chain<std::io::Cursor<Vec<u8>>, WithoutComments<std::io::BufReader<R>>>>;
@@ -435,6 +623,15 @@ pub struct LogReader<R: Read> {
     queued: std::collections::VecDeque<Sample>,
     long_gaps: Vec<FilledGap>,
     filled: Vec<FilledGap>,
+    delimiter: u8,
+    clock: Clock,
+    /// Rows with no value since the last complete one: their lines (the first few) and count.
+    empty: (Vec<u64>, usize),
+    /// Rows with no value before the first complete row or after the last: not filled.
+    left_out: Vec<u64>,
+    left_out_count: usize,
+    /// The first field with no value: (line, column).
+    first_empty: Option<(u64, usize)>,
     samples: usize,
     done: bool,
 }
@@ -539,6 +736,12 @@ impl<R: Read> LogReader<R> {
             queued: std::collections::VecDeque::new(),
             long_gaps: Vec::new(),
             filled: Vec::new(),
+            delimiter,
+            clock: Clock::default(),
+            empty: (Vec::new(), 0),
+            left_out: Vec::new(),
+            left_out_count: 0,
+            first_empty: None,
             samples: 0,
             done: false,
         })
@@ -547,6 +750,12 @@ impl<R: Read> LogReader<R> {
     /// Dropped samples filled in so far.
     pub fn filled(&self) -> &[FilledGap] {
         &self.filled
+    }
+
+    /// Lines of rows with no value (empty or NaN) that could not be filled, because no complete
+    /// row comes before them (the log's start) or after them (its end): left out.
+    pub fn left_out(&self) -> &[u64] {
+        &self.left_out
     }
 
     /// Bytes of the file read so far (for progress).
@@ -579,19 +788,46 @@ impl<R: Read> LogReader<R> {
                 expected: self.header_fields,
             });
         }
+        // More fields than the header: a decimal comma in a comma-separated log reads as two
+        // fields, so a row with more is refused (empty ones, a trailing separator, are not).
+        if record
+            .iter()
+            .skip(self.header_fields)
+            .any(|f| !f.trim().is_empty())
+        {
+            return Err(LogError::LongRow {
+                line,
+                found: record.len(),
+                expected: self.header_fields,
+            });
+        }
         let mut v = [0.0; 3];
+        let mut no_value = false;
         for k in 0..3 {
             let text = record.get(self.cols[k]).unwrap_or("").trim();
-            let x: f64 = text
-                .parse()
-                .ok()
-                .filter(|x: &f64| x.is_finite())
-                .ok_or_else(|| LogError::BadNumber {
-                    line,
-                    column: self.names[k].clone(),
-                    found: text.to_string(),
-                })?;
-            v[k] = x * self.factors[k];
+            if is_no_value(text) {
+                no_value = true;
+                self.first_empty.get_or_insert((line, k));
+                v[k] = f64::NAN;
+                continue;
+            }
+            let number = parse_number(text, self.delimiter);
+            let clock = match (k, number) {
+                (0, None) => self.clock.seconds(text, self.delimiter),
+                _ => None,
+            };
+            v[k] = match (number, clock) {
+                (Some(x), _) => x * self.factors[k],
+                (None, Some(seconds)) => seconds,
+                (None, None) => {
+                    return Err(LogError::BadNumber {
+                        line,
+                        column: self.names[k].clone(),
+                        found: text.to_string(),
+                        time: k == 0,
+                    })
+                }
+            };
             // Time may be a clock (epoch seconds); force and position have physical bounds.
             let limit = if k == 0 { f64::MAX } else { MAX_MAGNITUDE };
             if !v[k].is_finite() || v[k].abs() >= limit {
@@ -604,6 +840,18 @@ impl<R: Read> LogReader<R> {
                     limit,
                 });
             }
+        }
+        if no_value {
+            // A dropped reading: filled with the samples of a gap when a complete row follows.
+            if self.previous.is_none() {
+                self.push_left_out(line);
+            } else {
+                if self.empty.0.len() <= MAX_FILLED_SAMPLES {
+                    self.empty.0.push(line);
+                }
+                self.empty.1 += 1;
+            }
+            return Ok(true);
         }
         let sample = Sample {
             t_s: v[0],
@@ -620,8 +868,22 @@ impl<R: Read> LogReader<R> {
                 });
             }
             let tolerance = self.sampling_tolerance;
+            // Rows with no value between the two are dropped samples. When they fall before the
+            // sampling interval is known, it is the time between the two complete rows shared
+            // by the rows in between.
+            let (empty, empty_rows) = std::mem::take(&mut self.empty);
+            if self.nominal.is_none() {
+                self.nominal = Some(dt / (empty_rows + 1) as f64);
+            }
             match self.nominal {
-                None => self.nominal = Some(dt),
+                None => {}
+                Some(n) if empty_rows > 0 && (dt - n).abs() <= tolerance * n => {
+                    // No sample is missing: the rows with no value held none.
+                    for l in empty {
+                        self.push_left_out(l);
+                    }
+                    self.left_out_count += empty_rows.saturating_sub(MAX_FILLED_SAMPLES + 1);
+                }
                 Some(n) if (dt - n).abs() > tolerance * n => {
                     // Dropped samples: a whole number of intervals, within the tolerance.
                     let k = (dt / n).round();
@@ -638,6 +900,7 @@ impl<R: Read> LogReader<R> {
                         line,
                         after_s: prev.t_s,
                         samples: missing,
+                        empty_rows: empty_rows.min(missing),
                     };
                     if missing > MAX_FILLED_SAMPLES {
                         if self.long_gaps.len() < 100 {
@@ -663,23 +926,49 @@ impl<R: Read> LogReader<R> {
         self.queued.push_back(sample);
         Ok(true)
     }
+
+    /// Lists a row with no value that is not filled (the first 100).
+    fn push_left_out(&mut self, line: u64) {
+        if self.left_out.len() < 100 {
+            self.left_out.push(line);
+        }
+        self.left_out_count += 1;
+    }
+
+    /// How many rows with no value were left out ([`LogReader::left_out`] lists the first 100).
+    pub fn left_out_count(&self) -> usize {
+        self.left_out_count
+    }
 }
 
 impl<R: Read> Iterator for LogReader<R> {
     type Item = Result<Sample, LogError>;
 
     fn next(&mut self) -> Option<Self::Item> {
-        if self.queued.is_empty() && !self.done {
+        // A row with no value queues nothing: read on until a sample is queued or the end.
+        while self.queued.is_empty() && !self.done {
             match self.read_next() {
                 Ok(true) => {}
                 Ok(false) => {
                     self.done = true;
+                    let (lines, count) = std::mem::take(&mut self.empty);
+                    for line in lines {
+                        self.push_left_out(line);
+                    }
+                    self.left_out_count += count.saturating_sub(MAX_FILLED_SAMPLES + 1);
                     if !self.long_gaps.is_empty() {
                         return Some(Err(LogError::Gaps {
                             gaps: std::mem::take(&mut self.long_gaps),
                         }));
                     }
                     if self.samples < MIN_LOG_SAMPLES {
+                        if let Some((line, k)) = self.first_empty {
+                            return Some(Err(LogError::NoValues {
+                                line,
+                                column: self.names[k].clone(),
+                                rows: self.left_out_count,
+                            }));
+                        }
                         return Some(Err(LogError::TooShort {
                             found: self.samples,
                             needed: MIN_LOG_SAMPLES,
@@ -736,6 +1025,7 @@ pub fn collect_log<R: Read>(
             progress(reader.bytes_read());
         }
     }
+    log.left_out = (reader.left_out().to_vec(), reader.left_out_count());
     log.filled = reader.filled;
     Ok(log)
 }

@@ -483,7 +483,7 @@ fn collect(mut sim: Simulator, s: &SimSettings) -> Result<(CalibrationLog, Truth
         t_s: Vec::with_capacity(n),
         force_n: Vec::with_capacity(n),
         position_mm: Vec::with_capacity(n),
-        filled: Vec::new(),
+        ..CalibrationLog::default()
     };
     let mut truth = Truth {
         law: sim.law.clone(),
