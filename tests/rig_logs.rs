@@ -300,6 +300,52 @@ fn a_time_column_written_as_clock_time_is_read_as_seconds_from_the_first_row() {
 }
 
 #[test]
+fn a_clock_that_jitters_is_held_to_the_mean_interval() {
+    let text = base_log();
+    let reference = read(&text).unwrap();
+    // Timestamps off the 10 ms grid by up to 0.4 ms each way (the rig's clock stamps
+    // uniformly taken samples with jitter): intervals of 9.4 to 10.6 ms. The first is 10.7 ms,
+    // and the shortest differ from it by 12 %, from the mean by 6 %.
+    let jitter = |i: usize| match i {
+        0 => 0.0,
+        1 => 0.0007,
+        _ => 0.0004 * ((i as f64) * 1.7).sin(),
+    };
+    let mut jittered = String::from("t_s,force_n,position_mm\n");
+    for (i, l) in text.lines().skip(1).enumerate() {
+        let (t, rest) = l.split_once(',').unwrap();
+        let t: f64 = t.parse().unwrap();
+        jittered.push_str(&format!("{:.6},{rest}\n", t + jitter(i)));
+    }
+    let log = read(&jittered).unwrap();
+    assert_eq!(log.len(), reference.len());
+    assert!(log.filled.is_empty());
+    assert!((log.dt_s() - 0.01).abs() < 1e-6, "{}", log.dt_s());
+    // Jitter of 1.5 ms (30 % of an interval between neighbours) is refused, with the hint.
+    let mut rough = String::from("t_s,force_n,position_mm\n");
+    for (i, l) in text.lines().skip(1).enumerate() {
+        let (t, rest) = l.split_once(',').unwrap();
+        let t: f64 = t.parse().unwrap();
+        rough.push_str(&format!(
+            "{:.6},{rest}\n",
+            t + 0.0015 * ((i as f64) * 1.7).sin()
+        ));
+    }
+    let err = read(&rough).unwrap_err().to_string();
+    assert!(err.contains("--sampling-tolerance"), "{err}");
+    // A sample dropped among the first intervals is still a dropped sample, filled.
+    let early: String = text
+        .lines()
+        .enumerate()
+        .filter(|(i, _)| *i != 3)
+        .map(|(_, l)| format!("{l}\n"))
+        .collect();
+    let log = read(&early).unwrap();
+    assert_eq!((log.len(), log.filled.len()), (reference.len(), 1));
+    assert!((log.t_s[2] - reference.t_s[2]).abs() < 1e-9);
+}
+
+#[test]
 fn a_missing_column_message_gives_the_option_for_the_column_that_reads_as_it() {
     let text = base_log();
     let body = text.split_once('\n').unwrap().1;

@@ -412,7 +412,8 @@ pub enum LogError {
     /// Produced by [`read_log`] when an interval differs from the first one beyond tolerance.
     #[error(
         "line {line}: sampling interval {dt_s} s differs from the log's {nominal_s} s by more than \
-         {tolerance_percent} % (a gap or irregular sampling); expected evenly sampled data"
+         {tolerance_percent} % (a gap or irregular sampling); expected evenly sampled data (a \
+         rig whose clock stamps the samples with jitter needs a wider --sampling-tolerance)"
     )]
     Irregular {
         /// 1-based line.
@@ -619,6 +620,9 @@ pub struct LogReader<R: Read> {
     sampling_tolerance: f64,
     record: csv::StringRecord,
     nominal: Option<f64>,
+    /// Time of the first sample, and the sampling intervals since it.
+    first_t_s: Option<f64>,
+    intervals: u64,
     previous: Option<Sample>,
     queued: std::collections::VecDeque<Sample>,
     long_gaps: Vec<FilledGap>,
@@ -732,6 +736,8 @@ impl<R: Read> LogReader<R> {
             sampling_tolerance,
             record: csv::StringRecord::new(),
             nominal: None,
+            first_t_s: None,
+            intervals: 0,
             previous: None,
             queued: std::collections::VecDeque::new(),
             long_gaps: Vec::new(),
@@ -875,6 +881,8 @@ impl<R: Read> LogReader<R> {
             if self.nominal.is_none() {
                 self.nominal = Some(dt / (empty_rows + 1) as f64);
             }
+            // Sampling intervals from the previous sample to this one.
+            let mut intervals = 1u64;
             match self.nominal {
                 None => {}
                 Some(n) if empty_rows > 0 && (dt - n).abs() <= tolerance * n => {
@@ -884,6 +892,14 @@ impl<R: Read> LogReader<R> {
                     }
                     self.left_out_count += empty_rows.saturating_sub(MAX_FILLED_SAMPLES + 1);
                 }
+                // Over the first intervals the mean is still mostly the first one's jitter: an
+                // interval within the tolerance of the mean with it counted is regular too.
+                Some(_)
+                    if self.intervals < EARLY_INTERVALS && {
+                        let with_this = (sample.t_s - self.first_t_s.unwrap_or(prev.t_s))
+                            / (self.intervals + 1) as f64;
+                        (dt - with_this).abs() <= tolerance * with_this
+                    } => {}
                 Some(n) if (dt - n).abs() > tolerance * n => {
                     // Dropped samples: a whole number of intervals, within the tolerance.
                     let k = (dt / n).round();
@@ -896,6 +912,7 @@ impl<R: Read> LogReader<R> {
                         });
                     }
                     let missing = (k as usize).saturating_sub(1);
+                    intervals = k as u64;
                     let gap = FilledGap {
                         line,
                         after_s: prev.t_s,
@@ -921,6 +938,13 @@ impl<R: Read> LogReader<R> {
                 }
                 Some(_) => {}
             }
+            // The interval a sample is held to is the mean so far, not the first alone: a rig
+            // whose clock jitters may start with an interval at the edge of the tolerance.
+            self.intervals += intervals;
+            let (first, count) = (self.first_t_s.unwrap_or(prev.t_s), self.intervals);
+            self.nominal = Some((sample.t_s - first) / count as f64);
+        } else {
+            self.first_t_s = Some(sample.t_s);
         }
         self.previous = Some(sample);
         self.queued.push_back(sample);
@@ -987,6 +1011,9 @@ impl<R: Read> Iterator for LogReader<R> {
         Some(Ok(s))
     }
 }
+
+/// Intervals over which [`LogReader`] also holds an interval to the mean with it counted.
+const EARLY_INTERVALS: u64 = 16;
 
 /// The fewest samples a log may have.
 pub const MIN_LOG_SAMPLES: usize = 16;
