@@ -178,6 +178,7 @@ pub fn identification_json(
         "filter_bias_std": id.filter_bias_std,
         "noise_std": id.noise_std,
         "signal_share": id.signal_share,
+        "inertia_attenuation": id.inertia_attenuation,
         "fit": {
             "status": id.adequacy.status,
             "reduced_chi2": id.adequacy.reduced_chi2,
@@ -317,6 +318,15 @@ pub fn format_identification(id: &Identification, noise: &ResolvedNoise) -> Stri
              sharper than the {:.3} s window resolves (a servo's velocity steps; a motion whose \
              speed changes smoothly lets m be identified from them), or glitches in the log.",
             id.transient_samples, TRANSIENT_SIGMAS, id.reduced_chi2_with_transients, id.sg_window_s
+        );
+    }
+    if let Some(r) = id.inertia_attenuation {
+        let _ = writeln!(
+            s,
+            "  m is corrected for the {:.3} s window's loss of acceleration gain on this motion \
+             ({:.2} %, measured from the log; half the correction is in its standard deviation)",
+            id.sg_window_s,
+            100.0 * r
         );
     }
     let _ = writeln!(
