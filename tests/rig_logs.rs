@@ -343,6 +343,18 @@ fn a_clock_that_jitters_is_held_to_the_mean_interval() {
     let log = read(&early).unwrap();
     assert_eq!((log.len(), log.filled.len()), (reference.len(), 1));
     assert!((log.t_s[2] - reference.t_s[2]).abs() < 1e-9);
+    // And a reading lost on the second row, before any interval is known.
+    let second: String = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| match i {
+            2 => format!("{},NaN,NaN\n", l.split(',').next().unwrap()),
+            _ => format!("{l}\n"),
+        })
+        .collect();
+    let log = read(&second).unwrap();
+    assert_eq!((log.len(), log.filled.len()), (reference.len(), 1));
+    assert!((log.dt_s() - reference.dt_s()).abs() < 1e-12);
 }
 
 #[test]

@@ -893,9 +893,10 @@ impl<R: Read> LogReader<R> {
                     self.left_out_count += empty_rows.saturating_sub(MAX_FILLED_SAMPLES + 1);
                 }
                 // Over the first intervals the mean is still mostly the first one's jitter: an
-                // interval within the tolerance of the mean with it counted is regular too.
+                // interval within the tolerance of the mean with it counted is regular too (not
+                // the first, and not one with rows of no value in it: those span a gap).
                 Some(_)
-                    if self.intervals < EARLY_INTERVALS && {
+                    if (1..EARLY_INTERVALS).contains(&self.intervals) && empty_rows == 0 && {
                         let with_this = (sample.t_s - self.first_t_s.unwrap_or(prev.t_s))
                             / (self.intervals + 1) as f64;
                         (dt - with_this).abs() <= tolerance * with_this
