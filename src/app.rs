@@ -313,6 +313,9 @@ pub fn read_log_file(
         b.finish_and_clear();
     }
     let log = result.map_err(|e| log_error(path, e))?;
+    if let Some(n) = units_row_note(log.units_row.as_ref()) {
+        eprintln!("note: {}: {n}", path.display());
+    }
     if let Some(w) = filled_warning(&log.filled, &log.left_out.0, log.left_out.1) {
         eprintln!("warning: {}: {w}", path.display());
     }
@@ -328,6 +331,16 @@ fn reading_bar(path: &Path, size: u64) -> Option<indicatif::ProgressBar> {
     )?;
     bar.set_message(path.display().to_string());
     Some(bar)
+}
+
+/// The note for a units row under a log's header: its line and the units read.
+pub fn units_row_note(row: Option<&(u64, [String; 3])>) -> Option<String> {
+    row.map(|(line, [t, f, x])| {
+        format!(
+            "line {line} is a units row: time in {t}, force in {f}, position in {x} (where \
+             --time, --force or --position gives a unit other than s, N or mm, that one is kept)"
+        )
+    })
 }
 
 /// The warning for dropped samples that the reader filled, listing them (the first ten), and
@@ -666,6 +679,9 @@ pub fn survey_log_file(
         b.finish_and_clear();
     }
     let surveyed = surveyed.map_err(|e| log_error(log_path, e))?;
+    if let Some(n) = units_row_note(reader.units_row()) {
+        eprintln!("note: {}: {n}", log_path.display());
+    }
     if let Some(w) = filled_warning(reader.filled(), reader.left_out(), reader.left_out_count()) {
         eprintln!("warning: {}: {w}", log_path.display());
     }

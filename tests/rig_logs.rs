@@ -358,6 +358,35 @@ fn a_clock_that_jitters_is_held_to_the_mean_interval() {
 }
 
 #[test]
+fn a_units_row_under_the_header_gives_the_columns_units() {
+    let text = base_log();
+    let reference = read(&text).unwrap();
+    let (header, body) = text.split_once('\n').unwrap();
+    // Force logged in kN, with a units row as DAQ exports write one, tabs between fields.
+    let in_kn: String = body
+        .lines()
+        .map(|l| {
+            let v: Vec<f64> = l.split(',').map(|f| f.parse().unwrap()).collect();
+            format!("{}\t{}\t{}\n", v[0], v[1] / 1000.0, v[2])
+        })
+        .collect();
+    let log = read(&format!(
+        "{}\n[s]\t[kN]\t[mm]\n{in_kn}",
+        header.replace(',', "\t")
+    ))
+    .unwrap();
+    assert_eq!(
+        log.units_row,
+        Some((2, ["s".into(), "kN".into(), "mm".into()]))
+    );
+    assert_eq!(log.len(), reference.len());
+    assert!((log.force_n[700] - reference.force_n[700]).abs() < 1e-9);
+    // A row of text that is not units is still a bad number, named with its line.
+    let err = read(&format!("{header}\nseconds,kilo,mm\n{body}")).unwrap_err();
+    assert_eq!(err.line(), Some(2), "{err}");
+}
+
+#[test]
 fn a_missing_column_message_gives_the_option_for_the_column_that_reads_as_it() {
     let text = base_log();
     let body = text.split_once('\n').unwrap().1;

@@ -492,6 +492,9 @@ pub struct CalibrationLog {
     /// [`LogReader::left_out`] and [`LogReader::left_out_count`] give them.
     #[serde(skip)]
     pub left_out: (Vec<u64>, usize),
+    /// The units row under the header, when the log had one ([`LogReader::units_row`]).
+    #[serde(skip)]
+    pub units_row: Option<(u64, [String; 3])>,
 }
 
 impl CalibrationLog {
@@ -537,6 +540,34 @@ pub struct Sample {
     pub force_n: f64,
     /// Deflection.
     pub position_mm: f64,
+}
+
+/// The units of a units row (the row under the header of some loggers: `s;N;mm`, `[s] [N]
+/// [mm]`): each mapped field a unit of its column's dimension, brackets allowed, with its
+/// factor to s, N or mm. None when any field is not one.
+fn units_row(record: &csv::StringRecord, cols: &[usize; 3]) -> Option<[(String, f64); 3]> {
+    let dims = [Dimension::Time, Dimension::Force, Dimension::Length];
+    let mut out: [(String, f64); 3] = Default::default();
+    for k in 0..3 {
+        let text = record.get(cols[k])?.trim();
+        let unit = text
+            .trim_start_matches(['[', '('])
+            .trim_end_matches([']', ')'])
+            .trim();
+        if unit.is_empty() || unit.parse::<f64>().is_ok() {
+            return None;
+        }
+        let units = dims[k].units();
+        let (name, factor) = units.iter().find(|(u, _)| *u == unit).or_else(|| {
+            let same: Vec<&(&str, f64)> = units
+                .iter()
+                .filter(|(u, _)| u.eq_ignore_ascii_case(unit))
+                .collect();
+            (same.len() == 1).then(|| same[0])
+        })?;
+        out[k] = ((*name).to_string(), *factor);
+    }
+    Some(out)
 }
 
 /// A time column written as clock time, read as seconds from the first row's: a date and time
@@ -629,6 +660,10 @@ pub struct LogReader<R: Read> {
     filled: Vec<FilledGap>,
     delimiter: u8,
     clock: Clock,
+    /// Whether the first record after the header was looked at for a units row.
+    units_checked: bool,
+    /// A units row under the header: its line and the units it gives time, force and position.
+    units_row: Option<(u64, [String; 3])>,
     /// Rows with no value since the last complete one: their lines (the first few) and count.
     empty: (Vec<u64>, usize),
     /// Rows with no value before the first complete row or after the last: not filled.
@@ -744,6 +779,8 @@ impl<R: Read> LogReader<R> {
             filled: Vec::new(),
             delimiter,
             clock: Clock::default(),
+            units_checked: false,
+            units_row: None,
             empty: (Vec::new(), 0),
             left_out: Vec::new(),
             left_out_count: 0,
@@ -751,6 +788,13 @@ impl<R: Read> LogReader<R> {
             samples: 0,
             done: false,
         })
+    }
+
+    /// A units row under the header (`s;N;mm`, as some loggers write one), when there was
+    /// one: its line and the units read for time, force and position. A column read in its
+    /// default unit (s, N, mm) is read in the row's; one given another unit keeps it.
+    pub fn units_row(&self) -> Option<&(u64, [String; 3])> {
+        self.units_row.as_ref()
     }
 
     /// Dropped samples filled in so far.
@@ -806,6 +850,18 @@ impl<R: Read> LogReader<R> {
                 found: record.len(),
                 expected: self.header_fields,
             });
+        }
+        if !self.units_checked {
+            self.units_checked = true;
+            if let Some(units) = units_row(record, &self.cols) {
+                for (k, (_, factor)) in units.iter().enumerate() {
+                    if self.factors[k] == 1.0 {
+                        self.factors[k] = *factor;
+                    }
+                }
+                self.units_row = Some((line, units.map(|(u, _)| u)));
+                return Ok(true);
+            }
         }
         let mut v = [0.0; 3];
         let mut no_value = false;
@@ -1054,6 +1110,7 @@ pub fn collect_log<R: Read>(
         }
     }
     log.left_out = (reader.left_out().to_vec(), reader.left_out_count());
+    log.units_row = reader.units_row().cloned();
     log.filled = reader.filled;
     Ok(log)
 }
