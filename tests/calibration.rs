@@ -405,22 +405,7 @@ fn mapped_columns_and_units_read_the_same_log() {
             log.force_n[i] / 4.4482216152605
         ));
     }
-    let map = ColumnMap {
-        time: camspring::estimate::log::parse_time_column("time_ms:ms").unwrap(),
-        force: camspring::estimate::log::parse_column(
-            "F_lbf:lbf",
-            camspring::units::Dimension::Force,
-            "force",
-        )
-        .unwrap(),
-        position: camspring::estimate::log::parse_column(
-            "x_in:in",
-            camspring::units::Dimension::Length,
-            "position",
-        )
-        .unwrap(),
-        delimiter: camspring::estimate::log::Delimiter::Auto,
-    };
+    let map = common::column_map("time_ms:ms", "F_lbf:lbf", "x_in:in");
     let back = read_log(text.as_bytes(), &map, 0.1, |_| {}).unwrap();
     for i in 0..log.len() {
         assert!((back.t_s[i] - log.t_s[i]).abs() < 1e-9);

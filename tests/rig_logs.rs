@@ -410,22 +410,7 @@ fn a_missing_column_message_gives_the_option_for_the_column_that_reads_as_it() {
             format!("{},{},{}\n", v[0] * 1000.0, v[1], v[2] / 25.4)
         })
         .collect();
-    let map = ColumnMap {
-        time: camspring::estimate::log::parse_time_column("Time [ms]:ms").unwrap(),
-        force: camspring::estimate::log::parse_column(
-            "Force (N):N",
-            camspring::units::Dimension::Force,
-            "force",
-        )
-        .unwrap(),
-        position: camspring::estimate::log::parse_column(
-            "x_in:in",
-            camspring::units::Dimension::Length,
-            "position",
-        )
-        .unwrap(),
-        ..ColumnMap::default()
-    };
+    let map = common::column_map("Time [ms]:ms", "Force (N):N", "x_in:in");
     let log = read_log(
         format!("Time [ms],Force (N),x_in\n{scaled}").as_bytes(),
         &map,

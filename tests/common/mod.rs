@@ -107,3 +107,16 @@ pub fn three_holes() -> Vec<Hole> {
         })
         .collect()
 }
+
+/// The column map of `--time`, `--force` and `--position` options (`name:unit`), the
+/// separator detected.
+pub fn column_map(time: &str, force: &str, position: &str) -> camspring::estimate::log::ColumnMap {
+    use camspring::estimate::log::{parse_column, parse_time_column, ColumnMap};
+    use camspring::units::Dimension;
+    ColumnMap {
+        time: parse_time_column(time).unwrap(),
+        force: parse_column(force, Dimension::Force, "force").unwrap(),
+        position: parse_column(position, Dimension::Length, "position").unwrap(),
+        ..ColumnMap::default()
+    }
+}
