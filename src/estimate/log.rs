@@ -191,24 +191,25 @@ fn split_column<'a>(text: &'a str, what: &str) -> Result<(&'a str, Option<&'a st
     Ok((name, unit))
 }
 
-/// The unit a column name carries for a dimension (`t_ms`, `Force [N]`, `x (in)`), in the
-/// spelling the column options take; case is ignored where that leaves one unit.
-fn unit_in_name(tokens: &[&str], dim: Dimension) -> Option<&'static str> {
-    tokens.iter().rev().find_map(|t| {
-        let units = dim.units();
-        units
-            .iter()
-            .find(|(u, _)| u == t)
-            .map(|(u, _)| *u)
-            .or_else(|| {
-                let same: Vec<&str> = units
-                    .iter()
-                    .filter(|(u, _)| u.eq_ignore_ascii_case(t))
-                    .map(|(u, _)| *u)
-                    .collect();
-                (same.len() == 1).then(|| same[0])
-            })
+/// The unit `text` names for a dimension, in the spelling the column options take, with its
+/// factor to the default unit; case is ignored where that leaves one unit.
+fn unit_of(text: &str, dim: Dimension) -> Option<(&'static str, f64)> {
+    let units = dim.units();
+    units.iter().find(|(u, _)| *u == text).copied().or_else(|| {
+        let mut same = units.iter().filter(|(u, _)| u.eq_ignore_ascii_case(text));
+        match (same.next(), same.next()) {
+            (Some(u), None) => Some(*u),
+            _ => None,
+        }
     })
+}
+
+/// The unit a column name carries for a dimension (`t_ms`, `Force [N]`, `x (in)`).
+fn unit_in_name(tokens: &[&str], dim: Dimension) -> Option<&'static str> {
+    tokens
+        .iter()
+        .rev()
+        .find_map(|t| unit_of(t, dim).map(|(u, _)| u))
 }
 
 /// A hint for a missing column: the header's column whose name reads as the quantity (`time`,
@@ -557,15 +558,8 @@ fn units_row(record: &csv::StringRecord, cols: &[usize; 3]) -> Option<[(String, 
         if unit.is_empty() || unit.parse::<f64>().is_ok() {
             return None;
         }
-        let units = dims[k].units();
-        let (name, factor) = units.iter().find(|(u, _)| *u == unit).or_else(|| {
-            let same: Vec<&(&str, f64)> = units
-                .iter()
-                .filter(|(u, _)| u.eq_ignore_ascii_case(unit))
-                .collect();
-            (same.len() == 1).then(|| same[0])
-        })?;
-        out[k] = ((*name).to_string(), *factor);
+        let (name, factor) = unit_of(unit, dims[k])?;
+        out[k] = (name.to_string(), factor);
     }
     Some(out)
 }
