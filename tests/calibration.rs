@@ -450,6 +450,40 @@ mod never_panics {
                 let _ = identify(&log, &SensorNoise::default());
             }
         }
+
+        #[test]
+        fn reader_on_rig_text_in_any_separator_and_encoding(
+            header in prop_oneof![
+                Just("t_s,force_n,position_mm\n"), Just("t_s;force_n;position_mm;\n"),
+                Just("  t_s   force_n\tposition_mm\n"), Just("sep=;\nt_s;force_n;position_mm\n"),
+                Just("sep=|\nt_s|force_n|position_mm\n"), Just("# rig\r\nt_s\tforce_n\tposition_mm\r\n"),
+            ],
+            cells in proptest::collection::vec(
+                prop_oneof![
+                    Just(",".to_string()), Just(";".to_string()), Just("\t".to_string()), Just("  ".to_string()),
+                    Just("\n".to_string()), Just("\r\n".to_string()), Just("NaN".to_string()), Just("".to_string()),
+                    Just("sep=,".to_string()), Just("# x\n".to_string()), Just("12:00:01.5".to_string()),
+                    "[0-9.,eE+-]{1,8}".prop_map(|s| s),
+                ],
+                0..300,
+            ),
+            utf16 in 0u8..3,
+        ) {
+            let text = format!("{header}{}", cells.concat());
+            let bytes: Vec<u8> = match utf16 {
+                0 => text.into_bytes(),
+                1 => text.encode_utf16().flat_map(u16::to_le_bytes).collect(),
+                _ => std::iter::once(0xFEFF).chain(text.encode_utf16()).flat_map(u16::to_be_bytes).collect(),
+            };
+            match read_log(bytes.as_slice(), &ColumnMap::default(), 0.1, |_| {}) {
+                Ok(log) => {
+                    prop_assert!(log.t_s.windows(2).all(|w| w[1] > w[0]));
+                    prop_assert!(log.t_s.iter().chain(&log.force_n).chain(&log.position_mm).all(|v| v.is_finite()));
+                }
+                // A refusal says where: a line, or the whole log's length.
+                Err(e) => prop_assert!(e.line().is_some() || e.to_string().contains("sample"), "{}", e),
+            }
+        }
     }
 }
 

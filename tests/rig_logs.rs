@@ -1,5 +1,5 @@
-//! Calibration logs as rigs write them: comment lines, tab and semicolon separators, dropped
-//! samples, a wrong separator, an encoder zero that is off, and logs that cover only part of
+//! Calibration logs as rigs write them: comment lines, tab, semicolon and column-aligned
+//! separators, UTF-16 text, dropped samples, a wrong separator, an encoder zero that is off, and logs that cover only part of
 //! the stroke. Every log here is simulated with known truth and then rewritten in the rig's
 //! form, so each test knows what the reader must recover.
 
@@ -384,6 +384,110 @@ fn a_units_row_under_the_header_gives_the_columns_units() {
     // A row of text that is not units is still a bad number, named with its line.
     let err = read(&format!("{header}\nseconds,kilo,mm\n{body}")).unwrap_err();
     assert_eq!(err.line(), Some(2), "{err}");
+}
+
+#[test]
+fn column_aligned_text_and_a_spreadsheets_separator_line_read_the_same_samples() {
+    let text = base_log();
+    let reference = read(&text).unwrap();
+    let rows: Vec<Vec<&str>> = text.lines().map(|l| l.split(',').collect()).collect();
+    // Columns padded to a width with spaces, as a text logger or a .dat file writes them,
+    // with blanks before the first column and after the last.
+    let aligned: String = rows
+        .iter()
+        .map(|r| format!("  {:<14}{:>16} \t {:>14}  \n", r[0], r[1], r[2]))
+        .collect();
+    let log = read(&aligned).unwrap();
+    assert_eq!(log.t_s, reference.t_s);
+    assert_eq!(log.force_n, reference.force_n);
+    assert_eq!(log.position_mm, reference.position_mm);
+    // A header with no comma, tab or semicolon split at commas would be one column: the
+    // message names the separator it took.
+    let err = read_log(
+        aligned.as_bytes(),
+        &ColumnMap {
+            delimiter: Delimiter::Comma,
+            ..ColumnMap::default()
+        },
+        0.1,
+        |_| {},
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("split at commas") && err.contains("whitespace"),
+        "{err}"
+    );
+    // A spreadsheet's separator line before the header, and decimal commas under it.
+    let semi = format!("sep=;\n{}", text.replace(',', ";").replace('.', ","));
+    let log = read(&semi).unwrap();
+    assert_eq!(log.position_mm, reference.position_mm);
+    let err = read(&format!("sep=|\n{}", text.replace(',', "|")))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("line 1") && err.contains("\"sep=|\""), "{err}");
+}
+
+#[test]
+fn a_header_that_ends_in_a_separator_reads_rows_with_or_without_one() {
+    let text = base_log();
+    let reference = read(&text).unwrap();
+    let (header, body) = text.split_once('\n').unwrap();
+    // The header alone ends in a separator (as some loggers write it), then every line does.
+    for trailing in [
+        format!("{header},\n{body}"),
+        text.lines().map(|l| format!("{l},\n")).collect(),
+    ] {
+        let log = read(&trailing).unwrap();
+        assert_eq!(log.force_n, reference.force_n);
+    }
+    // A row with a value past the named columns is still refused.
+    let mut lines: Vec<String> = format!("{header},\n{body}")
+        .lines()
+        .map(str::to_string)
+        .collect();
+    lines[10].push_str(",7");
+    let err = read(&(lines.join("\n") + "\n")).unwrap_err();
+    assert_eq!(err.line(), Some(11), "{err}");
+}
+
+#[test]
+fn a_utf16_log_as_windows_tools_write_it_reads_the_same_samples() {
+    let text = base_log();
+    let reference = read(&text).unwrap();
+    let utf16 = |big: bool, bom: bool| -> Vec<u8> {
+        let mut units: Vec<u16> = Vec::new();
+        if bom {
+            units.push(0xFEFF);
+        }
+        units.extend(format!("# rig 3\r\n{}", text.replace('\n', "\r\n")).encode_utf16());
+        units
+            .iter()
+            .flat_map(|u| {
+                if big {
+                    u.to_be_bytes()
+                } else {
+                    u.to_le_bytes()
+                }
+            })
+            .collect()
+    };
+    for (big, bom) in [(false, true), (true, true), (false, false), (true, false)] {
+        let bytes = utf16(big, bom);
+        let log = read_log(bytes.as_slice(), &ColumnMap::default(), 0.1, |_| {})
+            .unwrap_or_else(|e| panic!("big-endian {big}, mark {bom}: {e}"));
+        assert_eq!(log.t_s, reference.t_s, "big-endian {big}, mark {bom}");
+        assert_eq!(log.position_mm, reference.position_mm);
+    }
+    // A bad number keeps its line in a UTF-16 file.
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    lines[40] = lines[40].replacen(',', ",x", 1);
+    let bad: Vec<u8> = (lines.join("\n") + "\n")
+        .encode_utf16()
+        .flat_map(u16::to_le_bytes)
+        .collect();
+    let err = read_log(bad.as_slice(), &ColumnMap::default(), 0.1, |_| {}).unwrap_err();
+    assert_eq!(err.line(), Some(41), "{err}");
 }
 
 #[test]

@@ -6,9 +6,11 @@
 //! collects it into a [`CalibrationLog`].
 //! Every error names the line and what was expected: a malformed or infinite number, a
 //! missing column, time that does not increase, or a sampling interval that differs from the
-//! first one by more than the stated tolerance (a gap or irregular sampling). A field that is
+//! mean so far by more than the stated tolerance (a gap or irregular sampling). A field that is
 //! empty or NaN is a reading the logger lost, filled like a dropped sample; where the separator
-//! is not a comma, decimal commas are read; a time column may hold clock time.
+//! is not a comma, decimal commas are read; a time column may hold clock time. The separator
+//! is a comma, tab, semicolon or runs of blanks (detected, given, or named by a `sep=` line);
+//! UTF-16 files are read transcoded.
 
 use std::io::Read;
 
@@ -42,7 +44,9 @@ pub struct ColumnMap {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Delimiter {
-    /// Detected from the header line: the most frequent of comma, tab and semicolon.
+    /// Detected from the header line: the most frequent of comma, tab and semicolon, or runs
+    /// of blanks where the header has none of them or only they give the mapped columns (a
+    /// `sep=;` line before the header, as spreadsheets write one, names it).
     #[default]
     Auto,
     /// `,`
@@ -51,34 +55,91 @@ pub enum Delimiter {
     Tab,
     /// `;`
     Semicolon,
+    /// Runs of spaces or tabs, as column-aligned text loggers write (a field cannot be empty).
+    Whitespace,
 }
 
 impl Delimiter {
-    /// The byte, detecting `Auto` from the header line.
-    fn byte(self, header: &str) -> u8 {
+    /// The separator, detecting `Auto` from the header line.
+    fn resolve(self, header: &str) -> Delimiter {
+        if self != Delimiter::Auto {
+            return self;
+        }
+        let count = |c: char| header.matches(c).count();
+        [
+            (Delimiter::Comma, count(',')),
+            (Delimiter::Tab, count('\t')),
+            (Delimiter::Semicolon, count(';')),
+        ]
+        .into_iter()
+        .max_by_key(|&(_, n)| n)
+        .filter(|&(_, n)| n > 0)
+        .map(|(d, _)| d)
+        .unwrap_or(if header.trim().contains(' ') {
+            Delimiter::Whitespace
+        } else {
+            Delimiter::Comma
+        })
+    }
+
+    /// The byte the CSV reader splits at (runs of blanks are first collapsed to one tab).
+    fn byte(self) -> u8 {
         match self {
-            Delimiter::Comma => b',',
-            Delimiter::Tab => b'\t',
+            Delimiter::Tab | Delimiter::Whitespace => b'\t',
             Delimiter::Semicolon => b';',
-            Delimiter::Auto => {
-                let count = |c: char| header.matches(c).count();
-                [(b',', count(',')), (b'\t', count('\t')), (b';', count(';'))]
-                    .into_iter()
-                    .max_by_key(|&(_, n)| n)
-                    .filter(|&(_, n)| n > 0)
-                    .map_or(b',', |(b, _)| b)
-            }
+            Delimiter::Comma | Delimiter::Auto => b',',
         }
     }
 
-    /// Its name in messages.
-    fn name(byte: u8) -> &'static str {
-        match byte {
-            b'\t' => "tab",
-            b';' => "semicolon",
-            _ => "comma",
+    /// What a line is split at, in messages.
+    fn name(self) -> &'static str {
+        match self {
+            Delimiter::Tab => "tabs",
+            Delimiter::Semicolon => "semicolons",
+            Delimiter::Whitespace => "runs of blanks",
+            Delimiter::Comma | Delimiter::Auto => "commas",
         }
     }
+
+    /// The separator a spreadsheet's `sep=X` line names.
+    fn from_sep_line(line: &str) -> Option<Option<Delimiter>> {
+        let rest = line.trim().strip_prefix("sep=")?;
+        Some(match rest {
+            "," => Some(Delimiter::Comma),
+            ";" => Some(Delimiter::Semicolon),
+            "\t" | "" => Some(Delimiter::Tab),
+            _ => None,
+        })
+    }
+}
+
+/// A line of column-aligned text with each run of blanks made one tab, and leading and
+/// trailing blanks dropped (its line break kept).
+fn collapse_blanks(line: &[u8]) -> Vec<u8> {
+    let end = line.len()
+        - line
+            .iter()
+            .rev()
+            .take_while(|b| **b == b'\n' || **b == b'\r')
+            .count();
+    let mut out = Vec::with_capacity(line.len());
+    let mut blank = false;
+    for &b in line[..end]
+        .iter()
+        .skip_while(|b| **b == b' ' || **b == b'\t')
+    {
+        if b == b' ' || b == b'\t' {
+            blank = true;
+            continue;
+        }
+        if blank {
+            out.push(b'\t');
+            blank = false;
+        }
+        out.push(b);
+    }
+    out.extend_from_slice(&line[end..]);
+    out
 }
 
 /// Whether a line is a comment (`#` or `;` first, after blanks) or blank.
@@ -95,6 +156,8 @@ struct WithoutComments<R> {
     inner: R,
     line: Vec<u8>,
     at: usize,
+    /// Whether runs of blanks are collapsed to one tab ([`Delimiter::Whitespace`]).
+    collapse: bool,
 }
 
 impl<R: std::io::BufRead> Read for WithoutComments<R> {
@@ -110,6 +173,8 @@ impl<R: std::io::BufRead> Read for WithoutComments<R> {
                 self.line.clear();
                 self.line
                     .extend_from_slice(if ends_cr { b"\r\n" } else { b"\n" });
+            } else if self.collapse {
+                self.line = collapse_blanks(&self.line);
             }
         }
         let n = buf.len().min(self.line.len() - self.at);
@@ -286,12 +351,24 @@ pub enum LogError {
     /// Produced by [`read_log`] when the file cannot be read or is not CSV.
     #[error("{0}")]
     Io(String),
+    /// Produced by [`read_log`] for a spreadsheet's separator line (`sep=X`) that names a
+    /// separator other than a comma, semicolon or tab.
+    #[error(
+        "line {line}: the separator line {} names a separator camspring does not read; expected sep=, sep=; or sep= and a tab",
+        quoted(found)
+    )]
+    SeparatorLine {
+        /// Line of the separator line.
+        line: u64,
+        /// The line as found.
+        found: String,
+    },
     /// Produced by [`read_log`] for a header without a needed column.
     #[error(
-        "line {line}: no column \"{name}\" for {what}; the header, split at {delimiter}s, has the columns {}{}",
+        "line {line}: no column \"{name}\" for {what}; the header, split at {delimiter}, has the columns {}{}",
         columns.iter().map(|c| quoted(c)).collect::<Vec<_>>().join(", "),
         if header.contains(name.as_str()) && !columns.iter().any(|c| c == name) {
-            format!("; the header line contains \"{name}\" but not as a field of its own: give --delimiter comma, tab or semicolon")
+            format!("; the header line contains \"{name}\" but not as a field of its own: give --delimiter comma, tab, semicolon or whitespace")
         } else {
             column_hint(what, columns)
         }
@@ -466,8 +543,14 @@ impl LogError {
             | LogError::OutOfRange { line, .. }
             | LogError::DuplicateColumn { line, .. }
             | LogError::MissingColumn { line, .. }
-            | LogError::NoValues { line, .. } => Some(*line),
+            | LogError::NoValues { line, .. }
+            | LogError::SeparatorLine { line, .. } => Some(*line),
             LogError::Gaps { gaps } => gaps.first().map(|g| g.line),
+            // The reader's own messages start with the line they are about.
+            LogError::Io(message) => message
+                .strip_prefix("line ")
+                .and_then(|rest| rest.split(':').next())
+                .and_then(|n| n.parse().ok()),
             _ => None,
         }
     }
@@ -624,9 +707,45 @@ impl Clock {
     }
 }
 
+/// The file as UTF-8 text: transcoded from UTF-16 where it is that.
+type Decoded<R> = encoding_rs_io::DecodeReaderBytes<std::io::BufReader<R>, Vec<u8>>;
+
 /// The source of the CSV records: the header line, then the rest with comments blanked.
-type Records<R> =
-    csv::Reader<std::io::Chain<std::io::Cursor<Vec<u8>>, WithoutComments<std::io::BufReader<R>>>>;
+type Records<R> = csv::Reader<
+    std::io::Chain<std::io::Cursor<Vec<u8>>, WithoutComments<std::io::BufReader<Decoded<R>>>>,
+>;
+
+/// The file read as UTF-8 text, and whether it was UTF-16. A byte-order mark names UTF-8 or
+/// UTF-16 (as Windows tools write them); without one, text whose first characters have a zero
+/// byte each, first or second, is UTF-16 (big- or little-endian); anything else is read as it
+/// is (UTF-8 or ASCII).
+fn decode<R: Read>(reader: R) -> std::io::Result<(Decoded<R>, bool)> {
+    let mut raw = std::io::BufReader::new(reader);
+    let head = std::io::BufRead::fill_buf(&mut raw)?;
+    let pairs: Vec<(u8, u8)> = head.chunks_exact(2).take(8).map(|c| (c[0], c[1])).collect();
+    let all = |f: fn(&(u8, u8)) -> bool| pairs.len() >= 2 && pairs.iter().all(f);
+    let guess = if all(|&(a, b)| a != 0 && b == 0) {
+        Some(encoding_rs::UTF_16LE)
+    } else if all(|&(a, b)| a == 0 && b != 0) {
+        Some(encoding_rs::UTF_16BE)
+    } else {
+        None
+    };
+    let bom = if head.starts_with(&[0xFF, 0xFE]) {
+        Some(encoding_rs::UTF_16LE)
+    } else if head.starts_with(&[0xFE, 0xFF]) {
+        Some(encoding_rs::UTF_16BE)
+    } else {
+        None
+    };
+    let utf16 = bom.or(guess).is_some();
+    let decoded = encoding_rs_io::DecodeReaderBytesBuilder::new()
+        .encoding(guess)
+        .bom_override(true)
+        .strip_bom(true)
+        .build(raw);
+    Ok((decoded, utf16))
+}
 
 /// A log read sample by sample: the streaming form of [`read_log`], for logs too long to hold
 /// (a day at 1 kHz is 86 million rows). Memory is constant: one CSV record, the samples of a
@@ -639,6 +758,8 @@ pub struct LogReader<R: Read> {
     rdr: Records<R>,
     offset: u64,
     header_fields: usize,
+    /// Whether the file is UTF-16 (read transcoded; its bytes are twice the text's).
+    utf16: bool,
     cols: [usize; 3],
     factors: [f64; 3],
     names: [String; 3],
@@ -685,10 +806,13 @@ impl<R: Read> LogReader<R> {
     /// columns. `sampling_tolerance` is the allowed relative deviation of each interval from
     /// the first (0.1 = 10 %).
     pub fn new(reader: R, map: &ColumnMap, sampling_tolerance: f64) -> Result<Self, LogError> {
-        let mut lines = std::io::BufReader::new(reader);
-        // The header is the first line that is not a comment or blank.
+        let (decoded, utf16) = decode(reader).map_err(|e| LogError::Io(format!("line 1: {e}")))?;
+        let mut lines = std::io::BufReader::new(decoded);
+        // The header is the first line that is not a comment or blank (or a spreadsheet's
+        // `sep=X` line, which names the separator).
         let mut header_line = 0u64;
         let mut header_text = Vec::new();
+        let mut named = None;
         loop {
             header_text.clear();
             let n = std::io::BufRead::read_until(&mut lines, b'\n', &mut header_text)
@@ -700,18 +824,62 @@ impl<R: Read> LogReader<R> {
                      expected a header such as t_s,force_n,position_mm"
                 )));
             }
-            if !is_comment_or_blank(&header_text) {
-                break;
+            if is_comment_or_blank(&header_text) {
+                continue;
+            }
+            match Delimiter::from_sep_line(&String::from_utf8_lossy(&header_text)) {
+                Some(Some(d)) if named.is_none() => named = Some(d),
+                Some(None) => {
+                    return Err(LogError::SeparatorLine {
+                        line: header_line,
+                        found: String::from_utf8_lossy(&header_text).trim().to_string(),
+                    })
+                }
+                _ => break,
             }
         }
         let header_str = String::from_utf8_lossy(&header_text).into_owned();
-        let delimiter = map.delimiter.byte(&header_str);
+        let separator = match (map.delimiter, named) {
+            (Delimiter::Auto, Some(d)) => d,
+            (Delimiter::Auto, None) => {
+                // Column-aligned text may hold a stray tab or comma between blanks: where the
+                // detected separator does not give the mapped columns and runs of blanks do,
+                // the blanks separate.
+                let detected = Delimiter::Auto.resolve(&header_str);
+                let has_columns = |fields: Vec<&str>| {
+                    let fields: Vec<&str> =
+                        fields.iter().map(|f| f.trim().trim_matches('"')).collect();
+                    [&map.time, &map.force, &map.position]
+                        .iter()
+                        .all(|c| fields.contains(&c.name.as_str()))
+                };
+                let split = header_str
+                    .trim()
+                    .split(char::from(detected.byte()))
+                    .collect();
+                if detected != Delimiter::Whitespace
+                    && !has_columns(split)
+                    && has_columns(header_str.split_whitespace().collect())
+                {
+                    Delimiter::Whitespace
+                } else {
+                    detected
+                }
+            }
+            (given, _) => given.resolve(&header_str),
+        };
+        let delimiter = separator.byte();
+        let collapse = separator == Delimiter::Whitespace;
+        if collapse {
+            header_text = collapse_blanks(&header_text);
+        }
         // The CSV reader sees the header, then the rest with comments blanked; its line numbers
         // are offset by the lines before the header.
         let body = WithoutComments {
             inner: lines,
             line: Vec::new(),
             at: 0,
+            collapse,
         };
         let mut rdr = csv::ReaderBuilder::new()
             .has_headers(true)
@@ -743,8 +911,15 @@ impl<R: Read> LogReader<R> {
                     what,
                     header: header_str.trim_end().to_string(),
                     columns: columns.clone(),
-                    delimiter: Delimiter::name(delimiter),
+                    delimiter: separator.name(),
                 })
+        };
+        // A header line that ends in a separator names no column there: rows may or may not
+        // end in one too.
+        let header_fields = if columns.len() > 1 && columns.last().is_some_and(String::is_empty) {
+            columns.len() - 1
+        } else {
+            columns.len()
         };
         let cols = [
             find(&map.time, "time")?,
@@ -754,7 +929,8 @@ impl<R: Read> LogReader<R> {
         Ok(LogReader {
             rdr,
             offset,
-            header_fields: header.len(),
+            header_fields,
+            utf16,
             cols,
             factors: [map.time.factor, map.force.factor, map.position.factor],
             names: [
@@ -804,7 +980,12 @@ impl<R: Read> LogReader<R> {
 
     /// Bytes of the file read so far (for progress).
     pub fn bytes_read(&self) -> u64 {
-        self.record.position().map_or(0, |p| p.byte())
+        let text = self.record.position().map_or(0, |p| p.byte());
+        if self.utf16 {
+            2 * text
+        } else {
+            text
+        }
     }
 
     /// Samples yielded so far, filled ones included.

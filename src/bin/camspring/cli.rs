@@ -486,7 +486,7 @@ pub struct Sensors {
     /// Position noise variance in mm^2 (overrides --noise and the log's own estimate).
     #[arg(long, value_parser = variance)]
     pub position_variance: Option<f64>,
-    /// Savitzky-Golay window, e.g. 0.8s (default about 0.4 s); longer for slow runs.
+    /// Savitzky-Golay window, e.g. 0.8s (default: chosen from the log by the balancing principle).
     #[arg(long, value_parser = duration)]
     pub window: Option<f64>,
 }
@@ -551,7 +551,7 @@ pub struct Columns {
     /// Position column and unit (mm, m, in).
     #[arg(long, default_value = "position_mm")]
     pub position: String,
-    /// Allowed deviation of each sampling interval from the first, e.g. 10%.
+    /// Allowed deviation of each sampling interval from the mean interval so far, e.g. 10%.
     #[arg(long, default_value = "10%", value_parser = fraction)]
     pub sampling_tolerance: f64,
     /// Field separator of the log (auto: detected from the header line).
@@ -562,7 +562,8 @@ pub struct Columns {
 /// Field separator of a log.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum DelimiterArg {
-    /// The most frequent of comma, tab and semicolon in the header line.
+    /// The most frequent of comma, tab and semicolon in the header line (runs of blanks where
+    /// it has none; a spreadsheet's sep= line names it).
     Auto,
     /// ,
     Comma,
@@ -570,6 +571,8 @@ pub enum DelimiterArg {
     Tab,
     /// ;
     Semicolon,
+    /// Runs of spaces or tabs (column-aligned text).
+    Whitespace,
 }
 
 impl From<DelimiterArg> for camspring::estimate::log::Delimiter {
@@ -580,6 +583,7 @@ impl From<DelimiterArg> for camspring::estimate::log::Delimiter {
             DelimiterArg::Comma => Delimiter::Comma,
             DelimiterArg::Tab => Delimiter::Tab,
             DelimiterArg::Semicolon => Delimiter::Semicolon,
+            DelimiterArg::Whitespace => Delimiter::Whitespace,
         }
     }
 }
