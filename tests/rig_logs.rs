@@ -358,6 +358,48 @@ fn a_clock_that_jitters_is_held_to_the_mean_interval() {
 }
 
 #[test]
+fn times_written_to_a_coarser_resolution_than_the_sampling_are_read_as_rounded() {
+    // A rig sampling at 300 Hz that writes its times in milliseconds: intervals of 3 and 4 ms
+    // (20 % off the mean), which are rounding, not irregular sampling.
+    let row = |i: usize| {
+        let t = i as f64 / 300.0;
+        (t, 20.0 + (t * 2.0).sin(), 7.5 + 5.0 * (t * 1.3).sin())
+    };
+    let n = 3000;
+    let seconds: String = std::iter::once("t_s,force_n,position_mm\n".to_string())
+        .chain((0..n).map(|i| {
+            let (t, f, x) = row(i);
+            format!("{t:.3},{f:.5},{x:.5}\n")
+        }))
+        .collect();
+    let log = read(&seconds).unwrap();
+    assert_eq!(log.len(), n);
+    assert!(log.filled.is_empty());
+    assert!((log.dt_s() - 1.0 / 300.0).abs() < 1e-6, "{}", log.dt_s());
+    // Whole milliseconds in a column mapped with its unit, and one dropped row among them,
+    // which is still found and filled.
+    let millis: String = std::iter::once("time_ms,force_n,position_mm\n".to_string())
+        .chain((0..n).filter(|&i| i != 1500).map(|i| {
+            let (t, f, x) = row(i);
+            format!("{},{f:.5},{x:.5}\n", (t * 1000.0).round())
+        }))
+        .collect();
+    let map = common::column_map("time_ms:ms", "force_n:N", "position_mm:mm");
+    let log = read_log(millis.as_bytes(), &map, 0.1, |_| {}).unwrap();
+    assert_eq!((log.len(), log.filled.len()), (n, 1));
+    assert!((log.position_mm[1500] - row(1500).2).abs() < 1e-3);
+    // Written to microseconds, the same 3 and 4 ms intervals are irregular sampling.
+    let fine: String = std::iter::once("t_s,force_n,position_mm\n".to_string())
+        .chain((0..n).map(|i| {
+            let (t, f, x) = row(i);
+            format!("{:.6},{f:.5},{x:.5}\n", (t * 1000.0).round() / 1000.0)
+        }))
+        .collect();
+    let err = read(&fine).unwrap_err();
+    assert!(matches!(err, LogError::Irregular { .. }), "{err}");
+}
+
+#[test]
 fn a_units_row_under_the_header_gives_the_columns_units() {
     let text = base_log();
     let reference = read(&text).unwrap();

@@ -218,6 +218,23 @@ fn parse_number(text: &str, delimiter: u8) -> Option<f64> {
     value.is_finite().then_some(value)
 }
 
+/// The resolution a time was written with, in the units it was written in: one unit of its
+/// last written digit (`0.013` and `1.3e-2` are to 0.001; `13` is to 1). A clock time's is that
+/// of its seconds (`08:35:31.12` is to 0.01 s).
+fn written_resolution(text: &str) -> f64 {
+    let (mantissa, exponent) = match text.find(['e', 'E']) {
+        Some(i) => (&text[..i], text[i + 1..].parse::<i32>().unwrap_or(0)),
+        None => (text, 0),
+    };
+    let decimals = mantissa.rfind(['.', ',']).map_or(0, |i| {
+        mantissa[i + 1..]
+            .chars()
+            .take_while(char::is_ascii_digit)
+            .count()
+    });
+    10f64.powi(exponent.saturating_sub(i32::try_from(decimals).unwrap_or(i32::MAX)))
+}
+
 /// The most consecutive dropped samples [`read_log`] fills by interpolation; a longer gap is
 /// refused.
 pub const MAX_FILLED_SAMPLES: usize = 3;
@@ -768,6 +785,9 @@ pub struct LogReader<R: Read> {
     nominal: Option<f64>,
     /// Time of the first sample, and the sampling intervals since it.
     first_t_s: Option<f64>,
+    /// The finest resolution (s) the times were written with so far (a writer that drops
+    /// trailing zeros writes some coarser than it keeps).
+    time_resolution_s: f64,
     intervals: u64,
     previous: Option<Sample>,
     queued: std::collections::VecDeque<Sample>,
@@ -942,6 +962,7 @@ impl<R: Read> LogReader<R> {
             record: csv::StringRecord::new(),
             nominal: None,
             first_t_s: None,
+            time_resolution_s: f64::INFINITY,
             intervals: 0,
             previous: None,
             queued: std::collections::VecDeque::new(),
@@ -1039,6 +1060,7 @@ impl<R: Read> LogReader<R> {
             }
         }
         let mut v = [0.0; 3];
+        let mut resolution_s = 0.0;
         let mut no_value = false;
         for k in 0..3 {
             let text = record.get(self.cols[k]).unwrap_or("").trim();
@@ -1053,6 +1075,14 @@ impl<R: Read> LogReader<R> {
                 (0, None) => self.clock.seconds(text, self.delimiter),
                 _ => None,
             };
+            if k == 0 {
+                resolution_s = written_resolution(text)
+                    * if clock.is_some() {
+                        1.0
+                    } else {
+                        self.factors[0]
+                    };
+            }
             v[k] = match (number, clock) {
                 (Some(x), _) => x * self.factors[k],
                 (None, Some(seconds)) => seconds,
@@ -1105,6 +1135,21 @@ impl<R: Read> LogReader<R> {
                 });
             }
             let tolerance = self.sampling_tolerance;
+            // An interval is known only to the times' written resolution: a rig at 300 Hz that
+            // writes milliseconds has intervals of 3 and 4 ms. Where that resolution is finer
+            // than an interval, its rounding is allowed on top of the tolerance, up to 0.4
+            // intervals (beyond, one and two intervals could not be told apart). Times written
+            // to the interval itself or coarser are whole intervals: nothing is rounded.
+            self.time_resolution_s = self.time_resolution_s.min(resolution_s);
+            let resolution = self.time_resolution_s;
+            let allowed = |n: f64| {
+                tolerance * n
+                    + if resolution < n {
+                        resolution.min(0.4 * n)
+                    } else {
+                        0.0
+                    }
+            };
             // Rows with no value between the two are dropped samples. When they fall before the
             // sampling interval is known, it is the time between the two complete rows shared
             // by the rows in between.
@@ -1116,7 +1161,7 @@ impl<R: Read> LogReader<R> {
             let mut intervals = 1u64;
             match self.nominal {
                 None => {}
-                Some(n) if empty_rows > 0 && (dt - n).abs() <= tolerance * n => {
+                Some(n) if empty_rows > 0 && (dt - n).abs() <= allowed(n) => {
                     // No sample is missing: the rows with no value held none.
                     for l in empty {
                         self.push_left_out(l);
@@ -1130,12 +1175,12 @@ impl<R: Read> LogReader<R> {
                     if (1..EARLY_INTERVALS).contains(&self.intervals) && empty_rows == 0 && {
                         let with_this = (sample.t_s - self.first_t_s.unwrap_or(prev.t_s))
                             / (self.intervals + 1) as f64;
-                        (dt - with_this).abs() <= tolerance * with_this
+                        (dt - with_this).abs() <= allowed(with_this)
                     } => {}
-                Some(n) if (dt - n).abs() > tolerance * n => {
+                Some(n) if (dt - n).abs() > allowed(n) => {
                     // Dropped samples: a whole number of intervals, within the tolerance.
                     let k = (dt / n).round();
-                    if k < 2.0 || (dt - k * n).abs() > tolerance * n {
+                    if k < 2.0 || (dt - k * n).abs() > allowed(n) {
                         return Err(LogError::Irregular {
                             line,
                             dt_s: dt,
@@ -1177,6 +1222,7 @@ impl<R: Read> LogReader<R> {
             self.nominal = Some((sample.t_s - first) / count as f64);
         } else {
             self.first_t_s = Some(sample.t_s);
+            self.time_resolution_s = resolution_s;
         }
         self.previous = Some(sample);
         self.queued.push_back(sample);
@@ -1301,4 +1347,25 @@ pub fn write_log(log: &CalibrationLog) -> Vec<u8> {
         ));
     }
     out.into_bytes()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::written_resolution;
+
+    #[test]
+    fn a_times_resolution_is_one_unit_of_its_last_written_digit() {
+        for (text, resolution) in [
+            ("0.013", 1e-3),
+            ("13", 1.0),
+            ("1.3e-2", 1e-3),
+            ("1.30E+3", 10.0),
+            ("12,25", 1e-2),
+            ("08:35:31.12", 1e-2),
+            ("2026-11-27T08:35:31.120Z", 1e-3),
+        ] {
+            let r = written_resolution(text);
+            assert!((r / resolution - 1.0).abs() < 1e-9, "{text}: {r}");
+        }
+    }
 }
