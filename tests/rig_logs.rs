@@ -627,6 +627,112 @@ fn shifted(text: &str, shift_mm: f64) -> String {
     out
 }
 
+/// Writes `text` with each row's force and position mapped, as a sensor wired reversed.
+fn mapped(text: &str, map: impl Fn(f64, f64) -> (f64, f64)) -> String {
+    let mut out = String::new();
+    for (i, l) in text.lines().enumerate() {
+        if i == 0 {
+            out.push_str(l);
+        } else {
+            let f: Vec<&str> = l.split(',').collect();
+            let (force, x) = map(f[1].parse().unwrap(), f[2].parse().unwrap());
+            out.push_str(&format!("{},{force:.6},{x:.6}", f[0]));
+        }
+        out.push('\n');
+    }
+    out
+}
+
+#[test]
+fn a_load_cell_or_an_encoder_read_reversed_is_named_and_read_with_a_negative_unit() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    simulate_paper(d, "6");
+    let text = std::fs::read_to_string(d.join("calib.csv")).unwrap();
+    // A load cell wired the other way, and an encoder counting down from the far end of a
+    // 30 mm travel.
+    std::fs::write(d.join("pull.csv"), mapped(&text, |f, x| (-f, x))).unwrap();
+    std::fs::write(d.join("down.csv"), mapped(&text, |f, x| (f, 30.0 - x))).unwrap();
+    let identify = |log: &str, extra: &[&str]| {
+        let mut args = vec!["identify", log, "--json"];
+        args.extend_from_slice(extra);
+        let out = camspring(d, &args);
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        (out.status.code(), v)
+    };
+    let (code, truth) = identify("calib.csv", &[]);
+    assert_eq!(
+        (code, &truth["sign_fault"]),
+        (Some(0), &serde_json::Value::Null)
+    );
+    // Each reversed log fits its law with every sign turned: not a result, with the sensor
+    // and the option named.
+    for (log, likely, option) in [
+        ("pull.csv", "load-cell", "--force NAME:-N"),
+        ("down.csv", "encoder", "--position NAME:-mm"),
+    ] {
+        let (code, v) = identify(log, &[]);
+        assert_eq!(code, Some(1), "{log}");
+        assert_eq!(v["fit"]["status"], "does-not-fit", "{log}");
+        assert_eq!(v["sign_fault"]["likely"], likely, "{log}");
+        assert!(
+            v["fit"]["reasons"].to_string().contains(option),
+            "{log}: {}",
+            v["fit"]["reasons"]
+        );
+        // The filter is not started from such a fit: the error names the sensor.
+        let out = camspring(d, &["estimate", log, "--out", "est"]);
+        assert_eq!(out.status.code(), Some(2), "{log}");
+        assert!(
+            String::from_utf8_lossy(&out.stderr).contains(option),
+            "{log}"
+        );
+    }
+    // The negative unit reads them as the rig meant: the load cell's log identifies exactly as
+    // the original, the encoder's with the same curvature (its zero is elsewhere).
+    let (code, v) = identify("pull.csv", &["--force", "force_n:-N"]);
+    assert_eq!(code, Some(0));
+    assert_eq!(v["parameters"], truth["parameters"]);
+    let (code, v) = identify("down.csv", &["--position", "position_mm:-mm"]);
+    assert_eq!(code, Some(0));
+    let k2 = |v: &serde_json::Value| v["parameters"]["k2_per_mm"].as_f64().unwrap();
+    assert!(
+        (k2(&v) / k2(&truth) - 1.0).abs() < 1e-6,
+        "{} {}",
+        k2(&v),
+        k2(&truth)
+    );
+    // validate with the encoder read reversed and its zero fitted passes, and reports the
+    // zero (-30 mm) within 0.05 mm.
+    let paper = spec_path("paper.toml");
+    let out = camspring(
+        d,
+        &[
+            "validate",
+            &paper,
+            "down.csv",
+            "--position",
+            "position_mm:-mm",
+            "--position-offset",
+            "auto",
+            "--json",
+        ],
+    );
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let offset = v["position_offset_mm"].as_f64().unwrap();
+    assert!((offset + 30.0).abs() < 0.05, "{offset}");
+    // Time cannot be reversed.
+    let out = camspring(d, &["identify", "calib.csv", "--time", "t_s:-s"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("time cannot be read reversed"));
+}
+
 #[test]
 fn an_encoder_zero_off_by_half_a_millimetre_is_found_and_taken_out() {
     let dir = tempfile::tempdir().unwrap();

@@ -293,6 +293,9 @@ pub struct Identification {
     pub window_choice: WindowChoice,
     /// Whether the model explains this log: reduced chi-square and residual whiteness.
     pub adequacy: Adequacy,
+    /// Parameters with signs no transmission has, and the sensor likely read reversed
+    /// (`judge_signs` in this module); the fit then does not fit.
+    pub sign_fault: Option<SignFault>,
     /// The filter's estimated bias in each parameter, in model order, already included in the
     /// standard deviations (zero when the window was given, or none was seen).
     pub filter_bias_std: [f64; 7],
@@ -1090,6 +1093,7 @@ fn identify_samples(
     let Some(w) = window_s else {
         let mut id = choose_window(log, noise)?;
         correct_inertia(&mut id);
+        judge_signs(&mut id, log);
         return Ok(id);
     };
     if w / dt < sg::MIN_WINDOW as f64 {
@@ -1108,7 +1112,102 @@ fn identify_samples(
         candidates: Vec::new(),
     };
     correct_inertia(&mut id);
+    judge_signs(&mut id, log);
     Ok(id)
+}
+
+/// How many standard deviations below zero an inertia or a viscous damping, or a stiffness of
+/// the wrong sign, must be for identification to call it impossible ([`SignFault`]).
+pub const IMPOSSIBLE_SIGMAS: f64 = 5.0;
+
+/// The sensor that a fit with impossible signs likely read reversed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ReversedSensor {
+    /// The force is negative on average: a load cell read with the opposite sign.
+    LoadCell,
+    /// The force rises as the position falls: an encoder that counts the other way.
+    Encoder,
+}
+
+/// A fit with parameters no transmission has: a negative inertia m or damping d1, or a spring
+/// force that falls as it extends, each beyond [`IMPOSSIBLE_SIGMAS`].
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SignFault {
+    /// What is impossible: `negative inertia m`, `negative damping d1`, `spring force that
+    /// falls as it extends`.
+    pub found: Vec<String>,
+    /// The sensor likely read reversed.
+    pub likely: ReversedSensor,
+}
+
+impl std::fmt::Display for SignFault {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let found = match self.found.split_last() {
+            Some((last, [])) => last.clone(),
+            Some((last, rest)) => format!("{} and {last}", rest.join(", ")),
+            None => String::new(),
+        };
+        write!(f, "the fit has {found}, which no transmission has; ")?;
+        match self.likely {
+            ReversedSensor::LoadCell => write!(
+                f,
+                "the force is negative on average, so the likely cause is a load cell read with \
+                 the opposite sign: give the force column a negative unit, --force NAME:-N"
+            ),
+            ReversedSensor::Encoder => write!(
+                f,
+                "the likely cause is an encoder that counts the other way (the force rises as \
+                 the position falls): give the position column a negative unit, --position \
+                 NAME:-mm (and --position-offset auto where its zero is then unknown)"
+            ),
+        }
+    }
+}
+
+/// Marks a fit whose parameters no transmission can have as not fitting, with the likely
+/// cause ([`SignFault`]): a negative inertia m, a negative viscous damping d1, or a spring
+/// whose force falls as it extends (mu k2 < 0), each beyond [`IMPOSSIBLE_SIGMAS`]. The fit
+/// itself may explain the log perfectly: a load cell or an encoder that counts the other way
+/// turns every force term's sign, so the law is fitted with all of them reversed.
+fn judge_signs(id: &mut Identification, log: &CalibrationLog) {
+    let below = |p: Param| {
+        let e = id.get(p);
+        matches!((e.value, e.std), (Some(v), Some(s)) if v < -IMPOSSIBLE_SIGMAS * s)
+    };
+    let resolved = |p: Param| {
+        let e = id.get(p);
+        matches!((e.value, e.std), (Some(v), Some(s)) if v.abs() > IMPOSSIBLE_SIGMAS * s)
+    };
+    let (mu, k2) = (id.get(Param::Mu).value, id.get(Param::K2).value);
+    let falling_spring = resolved(Param::Mu)
+        && resolved(Param::K2)
+        && mu.zip(k2).is_some_and(|(mu, k2)| mu * k2 < 0.0);
+    let mut found = Vec::new();
+    if below(Param::M) {
+        found.push("a negative inertia m".to_string());
+    }
+    if below(Param::D1) {
+        found.push("a negative damping d1".to_string());
+    }
+    if falling_spring {
+        found.push("a spring force that falls as it extends (mu k2 < 0)".to_string());
+    }
+    if found.is_empty() {
+        return;
+    }
+    let mean_force = log.force_n.iter().sum::<f64>() / log.force_n.len().max(1) as f64;
+    let fault = SignFault {
+        found,
+        likely: if mean_force < 0.0 {
+            ReversedSensor::LoadCell
+        } else {
+            ReversedSensor::Encoder
+        },
+    };
+    id.adequacy.status = FitStatus::DoesNotFit;
+    id.adequacy.reasons.push(fault.to_string());
+    id.sign_fault = Some(fault);
 }
 
 /// The identification at one Savitzky-Golay window.
@@ -1448,6 +1547,7 @@ pub(super) fn fit_model(
             candidates: Vec::new(),
         },
         adequacy,
+        sign_fault: None,
         filter_bias_std: [0.0; 7],
         noise_std: [0.0; 7],
         reduced_chi2_noise_change: 0.0,

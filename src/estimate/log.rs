@@ -342,15 +342,27 @@ fn column_hint(what: &str, columns: &[String]) -> String {
 /// Parses a `name` or `name:unit` column option for a dimension.
 pub fn parse_column(text: &str, dim: Dimension, what: &str) -> Result<Column, LogError> {
     let (name, unit) = split_column(text, what)?;
-    let factor = match unit {
-        None => 1.0,
-        Some(u) => parse_quantity(&format!("1 {u}"), dim).map_err(|_| {
-            LogError::Option(format!(
-                "--{what} {text}: unknown unit \"{u}\" (units: {})",
-                dim.unit_list()
-            ))
-        })?,
+    // A unit with a minus sign reads the column with the opposite sign: a load cell or an
+    // encoder that counts the other way.
+    let (sign, unit) = match unit.map(|u| u.strip_prefix('-').map(str::trim)) {
+        Some(Some(_)) if dim == Dimension::Time => {
+            return Err(LogError::Option(format!(
+                "--{what} {text}: time cannot be read reversed; expected a unit such as s or ms"
+            )))
+        }
+        Some(Some(u)) => (-1.0, (!u.is_empty()).then_some(u)),
+        _ => (1.0, unit),
     };
+    let factor = sign
+        * match unit {
+            None => 1.0,
+            Some(u) => parse_quantity(&format!("1 {u}"), dim).map_err(|_| {
+                LogError::Option(format!(
+                    "--{what} {text}: unknown unit \"{u}\" (units: {})",
+                    dim.unit_list()
+                ))
+            })?,
+        };
     Ok(Column {
         name: name.into(),
         factor,

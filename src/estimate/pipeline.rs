@@ -224,6 +224,10 @@ pub enum EstimateError {
         /// Its standard deviation (1/mm).
         k2_std: f64,
     },
+    /// Produced by [`estimate`] when identification, the filter's start, finds parameters of
+    /// signs no transmission has: a sensor read reversed, which the filter cannot follow.
+    #[error("identify: {0}")]
+    SignFault(super::identify::SignFault),
     /// Produced by [`estimate`] for [`PositionOffset::Auto`] without a law to fit against.
     #[error(
         "--position-offset auto fits the encoder zero against a designed law: use it with \
@@ -805,6 +809,9 @@ where
     let (mut init, identification, stroke) = match &opts.init {
         EstimateInit::Identify => {
             let id = identify_reduced(reduced, noise, opts.window_s)?;
+            if let Some(fault) = &id.sign_fault {
+                return Err(EstimateError::SignFault(fault.clone()));
+            }
             let k2 = id.get(super::identify::Param::K2);
             if let (Some(k2_per_mm), Some(k2_std)) = (k2.value, k2.std) {
                 if !super::identify::k2_resolved(k2_per_mm, k2_std) {
@@ -828,6 +835,9 @@ where
             // as before, with the dynamics wide open.
             match identify_reduced(reduced, noise, opts.window_s) {
                 Ok(id) => {
+                    if let Some(fault) = id.sign_fault {
+                        return Err(EstimateError::SignFault(fault));
+                    }
                     let mut init = EkfInit::from_identification(&id, noise.force_variance_n2);
                     let spring = EkfInit::from_law(law);
                     init.k2_per_mm = spring.k2_per_mm;
@@ -2121,7 +2131,9 @@ fn offset_from_identification(
 /// (mm) that minimises the squared difference between the measured force F_m(x) and the
 /// designed F_d(x - c) over the logged deflections `lo ..= hi`. A spring built right but logged
 /// with its zero off by c shows exactly such a shift; a spring built wrong leaves a residual,
-/// which the verdict then judges. The search covers shifts up to half the logged range.
+/// which the verdict then judges. The search covers shifts up to half the logged range
+/// or twice the largest logged position, whichever is more (an encoder read reversed is zeroed
+/// at the stroke's other end).
 pub fn fit_position_offset(
     measured: &ExpLaw,
     designed: &crate::model::ForceLaw,
@@ -2137,7 +2149,7 @@ pub fn fit_position_offset(
             .sum()
     };
     // A coarse grid, then golden-section refinement around its best point.
-    let half = 0.5 * span;
+    let half = (0.5 * span).max(2.0 * lo.abs().max(hi.abs()));
     let steps = 400;
     let mut best = (f64::INFINITY, 0.0);
     for i in 0..=steps {

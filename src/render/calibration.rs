@@ -179,6 +179,7 @@ pub fn identification_json(
         "noise_std": id.noise_std,
         "signal_share": id.signal_share,
         "inertia_attenuation": id.inertia_attenuation,
+        "sign_fault": id.sign_fault,
         "fit": {
             "status": id.adequacy.status,
             "reduced_chi2": id.adequacy.reduced_chi2,

@@ -545,10 +545,10 @@ pub struct Columns {
     /// Time column and unit (s, ms, us, min, h).
     #[arg(long, default_value = "t_s")]
     pub time: String,
-    /// Force column and unit (N, kN, lbf).
+    /// Force column and unit (N, kN, lbf); a minus sign reads it reversed (load:-N).
     #[arg(long, default_value = "force_n")]
     pub force: String,
-    /// Position column and unit (mm, m, in).
+    /// Position column and unit (mm, m, in); a minus sign reads it reversed (x:-mm).
     #[arg(long, default_value = "position_mm")]
     pub position: String,
     /// Allowed deviation of each sampling interval from the mean interval so far, e.g. 10%.
