@@ -990,6 +990,7 @@ pub fn run_validate(
             (Verdict::Law(v), svg_text, html)
         }
         ForceLaw::Table(_) | ForceLaw::Polynomial(_) => {
+            refuse_reversed_sensor(&log, &noise, opts.window_s)?;
             let mut v = validate_curve(&designed, &log, &noise, tolerance, band.as_ref());
             v.position_offset_mm = offset_mm;
             if judge_strokes(&mut v.criteria, &mut v.band_exits) {
@@ -1407,6 +1408,25 @@ pub struct DiagnoseOptions {
     pub zero: PositionOffset,
 }
 
+/// Refuses a log whose identification has signs no transmission has (a load cell or an
+/// encoder read reversed), naming the sensor and the option, before a verdict is drawn from
+/// it. A log identification cannot fit is left to the verdict, as before.
+fn refuse_reversed_sensor(
+    log: &crate::estimate::log::CalibrationLog,
+    noise: &crate::estimate::identify::SensorNoise,
+    window_s: Option<f64>,
+) -> Result<()> {
+    match crate::estimate::identify::identify_with_window(log, noise, window_s) {
+        Ok(id) => match id.sign_fault {
+            Some(fault) => Err(Error::Estimate(
+                crate::estimate::pipeline::EstimateError::SignFault(fault),
+            )),
+            None => Ok(()),
+        },
+        Err(_) => Ok(()),
+    }
+}
+
 /// The design and the diagnosis of a log against it.
 fn diagnose_log(
     spec: &Spec,
@@ -1419,6 +1439,7 @@ fn diagnose_log(
         .noise
         .resolve(crate::estimate::noise::log_noise(&log).as_ref());
     warn_noise(log_path, &resolved);
+    refuse_reversed_sensor(&log, &resolved.noise, opts.window_s)?;
     let diagnosis = crate::verdict::diagnose::diagnose(
         &design,
         &log,

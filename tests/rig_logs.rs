@@ -680,13 +680,23 @@ fn a_load_cell_or_an_encoder_read_reversed_is_named_and_read_with_a_negative_uni
             "{log}: {}",
             v["fit"]["reasons"]
         );
-        // The filter is not started from such a fit: the error names the sensor.
-        let out = camspring(d, &["estimate", log, "--out", "est"]);
-        assert_eq!(out.status.code(), Some(2), "{log}");
-        assert!(
-            String::from_utf8_lossy(&out.stderr).contains(option),
-            "{log}"
-        );
+        // The filter is not started from such a fit, nor a diagnosis or a verdict on a
+        // tabulated law drawn: the error names the sensor.
+        let paper = spec_path("paper.toml");
+        let knee = spec_path("knee.toml");
+        for args in [
+            vec!["estimate", log, "--out", "est"],
+            vec!["diagnose", paper.as_str(), log],
+            vec!["validate", knee.as_str(), log],
+        ] {
+            let out = camspring(d, &args);
+            assert_eq!(out.status.code(), Some(2), "{args:?}");
+            assert!(
+                String::from_utf8_lossy(&out.stderr).contains(option),
+                "{args:?}: {}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
     }
     // The negative unit reads them as the rig meant: the load cell's log identifies exactly as
     // the original, the encoder's with the same curvature (its zero is elsewhere).
