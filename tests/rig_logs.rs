@@ -400,6 +400,52 @@ fn times_written_to_a_coarser_resolution_than_the_sampling_are_read_as_rounded()
 }
 
 #[test]
+fn two_runs_in_one_file_are_named_as_such() {
+    let text = base_log();
+    let lines: Vec<&str> = text.lines().collect();
+    let run = lines[..2001].join("\n") + "\n";
+    let body = lines[1..2001].join("\n") + "\n";
+    // Files joined with their headers: the second header is named, with its line.
+    let err = read(&format!("{run}{}", run)).unwrap_err();
+    assert!(
+        matches!(err, LogError::RepeatedHeader { line: 2002 }),
+        "{err}"
+    );
+    assert!(err.to_string().contains("more than one run"), "{err}");
+    // A logger that restarted without a new header: the time starts again.
+    let err = read(&format!("{run}{body}")).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            LogError::TimeNotIncreasing {
+                line: 2002,
+                restarted: true,
+                ..
+            }
+        ),
+        "{err}"
+    );
+    assert!(err.to_string().contains("more than one run"), "{err}");
+    // A time that steps back mid-run is not taken for a restart.
+    let mut stepped: Vec<String> = lines.iter().map(|l| l.to_string()).collect();
+    let (t, rest) = lines[1500].split_once(',').unwrap();
+    stepped[1500] = format!("{},{rest}", t.parse::<f64>().unwrap() - 0.5);
+    let err = read(&(stepped.join("\n") + "\n")).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            LogError::TimeNotIncreasing {
+                line: 1501,
+                restarted: false,
+                ..
+            }
+        ),
+        "{err}"
+    );
+    assert!(!err.to_string().contains("more than one run"), "{err}");
+}
+
+#[test]
 fn a_units_row_under_the_header_gives_the_columns_units() {
     let text = base_log();
     let reference = read(&text).unwrap();

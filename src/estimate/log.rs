@@ -507,7 +507,15 @@ pub enum LogError {
         expected: usize,
     },
     /// Produced by [`read_log`] when time does not increase.
-    #[error("line {line}: time {t_s} s does not increase (previous sample at {previous_s} s)")]
+    #[error(
+        "line {line}: time {t_s} s does not increase (previous sample at {previous_s} s){}",
+        if *restarted {
+            "; the time starts again near the log's first, so the log holds more than one run \
+             (a logger that restarted, or files joined): give each run as its own log"
+        } else {
+            ""
+        }
+    )]
     TimeNotIncreasing {
         /// 1-based line.
         line: u64,
@@ -515,6 +523,17 @@ pub enum LogError {
         t_s: f64,
         /// Previous time.
         previous_s: f64,
+        /// Whether the time went back to within a few intervals of the log's first.
+        restarted: bool,
+    },
+    /// Produced by [`read_log`] for a row that repeats the header.
+    #[error(
+        "line {line} repeats the header: the log holds more than one run (a logger that \
+         restarted, or files joined); give each run as its own log"
+    )]
+    RepeatedHeader {
+        /// 1-based line.
+        line: u64,
     },
     /// Produced by [`read_log`] when an interval differs from the first one beyond tolerance.
     #[error(
@@ -568,6 +587,7 @@ impl LogError {
             | LogError::ShortRow { line, .. }
             | LogError::LongRow { line, .. }
             | LogError::TimeNotIncreasing { line, .. }
+            | LogError::RepeatedHeader { line, .. }
             | LogError::Irregular { line, .. }
             | LogError::OutOfRange { line, .. }
             | LogError::DuplicateColumn { line, .. }
@@ -787,6 +807,8 @@ pub struct LogReader<R: Read> {
     rdr: Records<R>,
     offset: u64,
     header_fields: usize,
+    /// The header's fields (trimmed), to know a repeated header.
+    header: Vec<String>,
     /// Whether the file is UTF-16 (read transcoded; its bytes are twice the text's).
     utf16: bool,
     cols: [usize; 3],
@@ -962,6 +984,7 @@ impl<R: Read> LogReader<R> {
             rdr,
             offset,
             header_fields,
+            header: columns.clone(),
             utf16,
             cols,
             factors: [map.time.factor, map.force.factor, map.position.factor],
@@ -1059,6 +1082,15 @@ impl<R: Read> LogReader<R> {
                 expected: self.header_fields,
             });
         }
+        // A row that repeats the header: two runs in one file.
+        if record.get(self.cols[0]).map(str::trim) == Some(self.header[self.cols[0]].as_str())
+            && record
+                .iter()
+                .zip(&self.header)
+                .all(|(field, name)| field.trim() == name)
+        {
+            return Err(LogError::RepeatedHeader { line });
+        }
         if !self.units_checked {
             self.units_checked = true;
             if let Some(units) = units_row(record, &self.cols) {
@@ -1140,10 +1172,14 @@ impl<R: Read> LogReader<R> {
         if let Some(prev) = self.previous {
             let dt = sample.t_s - prev.t_s;
             if dt <= 0.0 {
+                let first = self.first_t_s.unwrap_or(prev.t_s);
+                let interval = self.nominal.unwrap_or(0.0);
                 return Err(LogError::TimeNotIncreasing {
                     line,
                     t_s: sample.t_s,
                     previous_s: prev.t_s,
+                    restarted: self.intervals > 10
+                        && sample.t_s <= first + 10.0 * interval.max(0.0),
                 });
             }
             let tolerance = self.sampling_tolerance;
