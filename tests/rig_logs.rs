@@ -25,7 +25,16 @@ fn base_log() -> String {
 }
 
 fn read(text: &str) -> Result<camspring::CalibrationLog, LogError> {
-    read_log(text.as_bytes(), &ColumnMap::default(), 0.1, |_| {})
+    read_delimited(text, Delimiter::Auto)
+}
+
+/// Reads `text` with the default columns, split at the given separator.
+fn read_delimited(text: &str, delimiter: Delimiter) -> Result<camspring::CalibrationLog, LogError> {
+    let map = ColumnMap {
+        delimiter,
+        ..ColumnMap::default()
+    };
+    read_log(text.as_bytes(), &map, 0.1, |_| {})
 }
 
 #[test]
@@ -47,12 +56,7 @@ fn comments_and_separators_of_rig_logs_read_the_same_samples() {
     assert_eq!(log.force_n, reference.force_n);
     assert_eq!(log.position_mm, reference.position_mm);
     // Semicolons, given explicitly.
-    let semi = text.replace(',', ";");
-    let map = ColumnMap {
-        delimiter: Delimiter::Semicolon,
-        ..ColumnMap::default()
-    };
-    let log = read_log(semi.as_bytes(), &map, 0.1, |_| {}).unwrap();
+    let log = read_delimited(&text.replace(',', ";"), Delimiter::Semicolon).unwrap();
     assert_eq!(log.position_mm, reference.position_mm);
     // Line numbers are the file's, comments included: a bad number on data row 1000 of the
     // tab file (3 comment lines, the header, 1000 rows and the 2 inserted lines before it).
@@ -68,11 +72,7 @@ fn comments_and_separators_of_rig_logs_read_the_same_samples() {
 #[test]
 fn a_wrong_separator_is_named_in_the_message() {
     let tab = base_log().replace(',', "\t");
-    let map = ColumnMap {
-        delimiter: Delimiter::Comma,
-        ..ColumnMap::default()
-    };
-    let err = read_log(tab.as_bytes(), &map, 0.1, |_| {}).unwrap_err();
+    let err = read_delimited(&tab, Delimiter::Comma).unwrap_err();
     let msg = err.to_string();
     assert!(
         msg.contains("line 1") && msg.contains("split at commas"),
@@ -491,17 +491,9 @@ fn column_aligned_text_and_a_spreadsheets_separator_line_read_the_same_samples()
     assert_eq!(log.position_mm, reference.position_mm);
     // A header with no comma, tab or semicolon split at commas would be one column: the
     // message names the separator it took.
-    let err = read_log(
-        aligned.as_bytes(),
-        &ColumnMap {
-            delimiter: Delimiter::Comma,
-            ..ColumnMap::default()
-        },
-        0.1,
-        |_| {},
-    )
-    .unwrap_err()
-    .to_string();
+    let err = read_delimited(&aligned, Delimiter::Comma)
+        .unwrap_err()
+        .to_string();
     assert!(
         err.contains("split at commas") && err.contains("whitespace"),
         "{err}"
