@@ -235,6 +235,18 @@ fn written_resolution(text: &str) -> f64 {
     10f64.powi(exponent.saturating_sub(i32::try_from(decimals).unwrap_or(i32::MAX)))
 }
 
+/// A sampling interval in messages: in ms to five significant digits below a second
+/// (`3.3333 ms`), else in s.
+fn interval_text(seconds: f64) -> String {
+    if seconds.abs() < 1.0 {
+        let ms = seconds * 1e3;
+        let decimals = (4 - ms.abs().log10().floor().clamp(-6.0, 4.0) as i32).max(0) as usize;
+        format!("{ms:.decimals$} ms")
+    } else {
+        format!("{seconds:.4} s")
+    }
+}
+
 /// The most consecutive dropped samples [`read_log`] fills by interpolation; a longer gap is
 /// refused.
 pub const MAX_FILLED_SAMPLES: usize = 3;
@@ -535,18 +547,21 @@ pub enum LogError {
         /// 1-based line.
         line: u64,
     },
-    /// Produced by [`read_log`] when an interval differs from the first one beyond tolerance.
+    /// Produced by [`read_log`] when an interval differs from the mean so far beyond
+    /// tolerance.
     #[error(
-        "line {line}: sampling interval {dt_s} s differs from the log's {nominal_s} s by more than \
+        "line {line}: sampling interval {} differs from the log's {} by more than \
          {tolerance_percent} % (a gap or irregular sampling); expected evenly sampled data (a \
-         rig whose clock stamps the samples with jitter needs a wider --sampling-tolerance)"
+         rig whose clock stamps the samples with jitter needs a wider --sampling-tolerance)",
+        interval_text(*dt_s),
+        interval_text(*nominal_s)
     )]
     Irregular {
         /// 1-based line.
         line: u64,
         /// Interval found.
         dt_s: f64,
-        /// The first interval.
+        /// The mean interval so far.
         nominal_s: f64,
         /// Tolerance.
         tolerance_percent: f64,
@@ -1400,6 +1415,14 @@ pub fn write_log(log: &CalibrationLog) -> Vec<u8> {
 #[cfg(test)]
 mod tests {
     use super::written_resolution;
+
+    #[test]
+    fn intervals_in_messages_read_to_five_significant_digits() {
+        assert_eq!(super::interval_text(1.0 / 300.0), "3.3333 ms");
+        assert_eq!(super::interval_text(0.01), "10.000 ms");
+        assert_eq!(super::interval_text(0.000_05), "0.050000 ms");
+        assert_eq!(super::interval_text(2.5), "2.5000 s");
+    }
 
     #[test]
     fn a_times_resolution_is_one_unit_of_its_last_written_digit() {
