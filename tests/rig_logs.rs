@@ -651,21 +651,11 @@ fn simulate_paper(dir: &std::path::Path, seed: &str) {
 
 /// Writes `text` with every position moved by `shift_mm`, as an encoder zeroed off.
 fn shifted(text: &str, shift_mm: f64) -> String {
-    let mut out = String::new();
-    for (i, l) in text.lines().enumerate() {
-        if i == 0 {
-            out.push_str(l);
-        } else {
-            let f: Vec<&str> = l.split(',').collect();
-            let x: f64 = f[2].parse().unwrap();
-            out.push_str(&format!("{},{},{:.6}", f[0], f[1], x + shift_mm));
-        }
-        out.push('\n');
-    }
-    out
+    mapped(text, |force, x| (force, x + shift_mm))
 }
 
-/// Writes `text` with each row's force and position mapped, as a sensor wired reversed.
+/// Writes `text` with each row's force and position mapped (as a sensor wired reversed or
+/// zeroed off), each written exactly.
 fn mapped(text: &str, map: impl Fn(f64, f64) -> (f64, f64)) -> String {
     let mut out = String::new();
     for (i, l) in text.lines().enumerate() {
@@ -674,7 +664,7 @@ fn mapped(text: &str, map: impl Fn(f64, f64) -> (f64, f64)) -> String {
         } else {
             let f: Vec<&str> = l.split(',').collect();
             let (force, x) = map(f[1].parse().unwrap(), f[2].parse().unwrap());
-            out.push_str(&format!("{},{force:.6},{x:.6}", f[0]));
+            out.push_str(&format!("{},{force},{x}", f[0]));
         }
         out.push('\n');
     }
