@@ -260,6 +260,8 @@ pub struct Identification {
     /// correction removes almost all of it (and, being a first-order correction, is then not
     /// to be trusted).
     pub signal_share: f64,
+    /// How the dynamic rows were regressed ([`Regression`]).
+    pub regression: Regression,
     /// The acceleration filter's loss of gain over this log's motion, estimated from the data
     /// (`inertia_attenuation` in this module), with which m was corrected ([`correct_inertia`]); None where
     /// m is not fitted or the log does not determine it.
@@ -382,6 +384,29 @@ impl Identification {
     }
 }
 
+/// How identification regresses the force on the dynamic samples.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Regression {
+    /// The force at each sample against the filtered acceleration, velocity and position
+    /// there. The acceleration filter smooths the motion's corners (a jerk's steps, a long
+    /// window on sines) while the force keeps them, so m comes out high by the filter's
+    /// loss of gain, which is then corrected to first order (`inertia_attenuation`).
+    Direct,
+    /// The parallel filter (IDIM's "parallel filtering"). The filtered acceleration is the
+    /// smoother Q ([`acceleration_smoother`]) applied to the second difference over two
+    /// samples, which is exactly the acceleration's mean under a triangle two samples wide
+    /// each side; on the samples the three-sample mean T has the same weight and spread (and
+    /// is exact at a corner on a sample). So the force goes through Q after T, and every
+    /// other column with it: the velocity's as they are, the spring's as Q applied to
+    /// exp(k2 x) (1 + dt^2/3 (k2 xdd + k2^2 xd^2)), whose second factor is T's effect. The
+    /// inertia force has then been through the same filter on both sides, and m carries no
+    /// filter bias. A row's filter must reach only moving samples (a rest's or a turn's
+    /// friction is unknown), so this is used where at least [`PARALLEL_MIN_SHARE`] of the
+    /// moving samples qualify.
+    ParallelFilter,
+}
+
 /// Why identification failed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum IdentifyError {
@@ -451,12 +476,32 @@ struct Rows {
     x: Vec<f64>,
     xd: Vec<f64>,
     xdd: Vec<f64>,
+    /// The force: at the sample, or through the parallel filter ([`Filtered`]).
     f: Vec<f64>,
+    /// The friction sign: at the sample, or through the parallel filter.
     sgn: Vec<f64>,
     var_x: f64,
     var_xd: f64,
     var_xdd: f64,
     var_f: f64,
+    /// The parallel filter's columns, when the rows went through it.
+    filtered: Option<Filtered>,
+}
+
+/// Rows through the parallel filter ([`Parallel`]): the velocity columns filtered, and the
+/// exponential's filtered column as moments about a k2.
+#[derive(Clone)]
+struct Filtered {
+    /// The filtered velocity regressor.
+    xd: Vec<f64>,
+    /// The filtered unbiased cube of the velocity ([`unbiased_cube`]).
+    cube: Vec<f64>,
+    /// sum_j q_j c_j d_j^k exp(k2_ref d_j), k = 0, 1, 2 ([`exp_moments`]).
+    moments: [Vec<f64>; 3],
+    /// The k2 the moments were summed at.
+    k2_ref: f64,
+    /// Noise variance of the filtered velocity column.
+    var_xd: f64,
 }
 
 impl Rows {
@@ -482,8 +527,108 @@ impl Rows {
             var_xd: if dynamic { self.var_xd } else { 0.0 },
             var_xdd: if dynamic { self.var_xdd } else { 0.0 },
             var_f: self.var_f,
+            filtered: None,
         }
     }
+
+    /// The rows at the samples `keep` of these (every sample's) rows through the parallel
+    /// filter, the exponential's moments summed at `k2`.
+    fn parallel(&self, keep: &[usize], par: &Parallel, k2: f64) -> Rows {
+        let pick = |v: &Vec<f64>| keep.iter().map(|&i| v[i]).collect::<Vec<f64>>();
+        let mut rows = self.subset(keep, true);
+        rows.f = pick(&par.f);
+        rows.sgn = pick(&par.sgn);
+        rows.var_x = par.var_x;
+        rows.var_f = par.var_f;
+        rows.filtered = Some(Filtered {
+            xd: pick(&par.xd),
+            cube: pick(&par.cube),
+            moments: exp_moments(self, par, &rows.index, k2),
+            k2_ref: k2,
+            var_xd: par.var_xd,
+        });
+        rows
+    }
+
+    /// Sums the exponential's moments again at `k2` (`all`: every sample's rows).
+    fn refresh_moments(&mut self, all: &Rows, par: &Parallel, k2: f64) {
+        if let Some(f) = self.filtered.as_mut() {
+            f.moments = exp_moments(all, par, &self.index, k2);
+            f.k2_ref = k2;
+        }
+    }
+}
+
+/// The parallel filter over every sample: the force, the friction sign and the velocity
+/// columns through it, and their noise variances (see [`fit_model`]).
+struct Parallel {
+    /// Q's weights (every second sample, centred: [`acceleration_smoother`]).
+    q: Vec<f64>,
+    /// dt^2 / 3: the three-sample mean's curvature term.
+    curvature: f64,
+    f: Vec<f64>,
+    sgn: Vec<f64>,
+    xd: Vec<f64>,
+    cube: Vec<f64>,
+    /// Noise variance of the filtered position (through the exponential's column).
+    var_x: f64,
+    /// Noise variance of the filtered force.
+    var_f: f64,
+    /// Noise variance of the filtered velocity.
+    var_xd: f64,
+}
+
+/// The filter `kernel` (consecutive samples, centred) applied to `y`: NaN within its half
+/// width of either end.
+fn parallel_filter(kernel: &[f64], y: &[f64]) -> Vec<f64> {
+    let half = kernel.len() / 2;
+    let n = y.len();
+    (0..n)
+        .map(|s| {
+            if s < half || s + half >= n {
+                return f64::NAN;
+            }
+            kernel
+                .iter()
+                .zip(&y[s - half..=s + half])
+                .map(|(k, v)| k * v)
+                .sum()
+        })
+        .collect()
+}
+
+/// The parallel filter's exponential column at each sample s of `index`: the moments
+/// sum_j q_j c_j d_j^k exp(k2 d_j), k = 0, 1, 2, with d_j = x(t_j) - x(s) at Q's taps
+/// t_j = s + 2 j - 2 (len(q) / 2) and c_j = 1 + dt^2/3 (k2 xdd(t_j) + k2^2 xd(t_j)^2), the
+/// three-sample mean's curvature term of exp(k2 x) (NaN within Q's reach of either end).
+/// Q applied to exp(k2' x) is then exp(k2' x(s)) times their Taylor sum in k2' - k2.
+fn exp_moments(all: &Rows, par: &Parallel, index: &[usize], k2: f64) -> [Vec<f64>; 3] {
+    let reach = 2 * (par.q.len() / 2);
+    let x = &all.x;
+    let mut out = [
+        Vec::with_capacity(index.len()),
+        Vec::with_capacity(index.len()),
+        Vec::with_capacity(index.len()),
+    ];
+    for &s in index {
+        let (mut m0, mut m1, mut m2) = (f64::NAN, f64::NAN, f64::NAN);
+        if s >= reach && s + reach < x.len() {
+            (m0, m1, m2) = (0.0, 0.0, 0.0);
+            for (j, qj) in par.q.iter().enumerate() {
+                let t = s + 2 * j - reach;
+                let d = x[t] - x[s];
+                let c = 1.0 + par.curvature * k2 * (all.xdd[t] + k2 * all.xd[t] * all.xd[t]);
+                let w = qj * c * (k2 * d).exp();
+                m0 += w;
+                m1 += w * d;
+                m2 += w * d * d;
+            }
+        }
+        out[0].push(m0);
+        out[1].push(m1);
+        out[2].push(m2);
+    }
+    out
 }
 
 type V7 = SVector<f64, 7>;
@@ -492,10 +637,31 @@ type Active = [bool; 7];
 
 /// Model force and Jacobian row for parameters p = [m, d0, d1, d2, mu, F0, k2].
 fn model(p: &V7, r: &Rows, i: usize) -> (f64, V7) {
-    let e = (p[K2] * r.x[i]).exp();
-    let xd3 = unbiased_cube(r.xd[i], r.var_xd);
-    let row = V7::from([r.xdd[i], r.sgn[i], r.xd[i], xd3, e, 1.0, p[MU] * r.x[i] * e]);
-    let f = p[M] * r.xdd[i] + p[D0] * r.sgn[i] + p[D1] * r.xd[i] + p[D2] * xd3 + p[MU] * e + p[F0];
+    let at_row = (p[K2] * r.x[i]).exp();
+    let (xd, xd3, e, k2_column) = match &r.filtered {
+        None => (
+            r.xd[i],
+            unbiased_cube(r.xd[i], r.var_xd),
+            at_row,
+            p[MU] * r.x[i] * at_row,
+        ),
+        Some(q) => {
+            // The filtered exp(k2 x) = exp(k2 x_row) sum_j q_j c_j exp(k2 d_j): a Taylor sum
+            // in k2 - k2_ref, exact at k2_ref (the fit sums the moments again where it ends).
+            let d = p[K2] - q.k2_ref;
+            let [m0, m1, m2] = [q.moments[0][i], q.moments[1][i], q.moments[2][i]];
+            let sum = m0 + d * (m1 + 0.5 * d * m2);
+            let slope = m1 + d * m2;
+            (
+                q.xd[i],
+                q.cube[i],
+                at_row * sum,
+                p[MU] * at_row * (r.x[i] * sum + slope),
+            )
+        }
+    };
+    let row = V7::from([r.xdd[i], r.sgn[i], xd, xd3, e, 1.0, k2_column]);
+    let f = p[M] * r.xdd[i] + p[D0] * r.sgn[i] + p[D1] * xd + p[D2] * xd3 + p[MU] * e + p[F0];
     (f, row)
 }
 
@@ -503,10 +669,8 @@ fn model(p: &V7, r: &Rows, i: usize) -> (f64, V7) {
 fn row_variance(p: &V7, r: &Rows, i: usize) -> f64 {
     let stiffness = p[K2] * p[MU] * (p[K2] * r.x[i]).exp();
     let damping = p[D1] + 3.0 * p[D2] * r.xd[i] * r.xd[i];
-    r.var_f
-        + stiffness * stiffness * r.var_x
-        + damping * damping * r.var_xd
-        + p[M] * p[M] * r.var_xdd
+    let var_xd = r.filtered.as_ref().map_or(r.var_xd, |q| q.var_xd);
+    r.var_f + stiffness * stiffness * r.var_x + damping * damping * var_xd + p[M] * p[M] * r.var_xdd
 }
 
 fn weights_at(p: &V7, r: &Rows) -> Vec<f64> {
@@ -554,6 +718,15 @@ fn row_correction(r: &Rows, i: usize, active: &Active) -> M7 {
         }
         if active[D2] {
             c[(D2, D2)] = 9.0 * v4 * s2 + 18.0 * v2 * s2 * s2 + 6.0 * s2 * s2 * s2;
+        }
+        // Through the parallel filter the columns' noise is the filtered velocity's: to first
+        // order in the noise (the velocity nearly constant over the filter) each entry scales
+        // with its variance.
+        if let Some(q) = &r.filtered {
+            let scale = q.var_xd / s2;
+            for (a, b) in [(D1, D1), (D1, D2), (D2, D1), (D2, D2)] {
+                c[(a, b)] *= scale;
+            }
         }
     }
     c
@@ -1288,7 +1461,10 @@ pub(super) fn fit_model(
         var_xd,
         var_xdd,
         var_f: noise.force_variance_n2,
+        filtered: None,
     };
+    // The samples the parallel filter reaches each side (see [`parallel_columns`]).
+    let reach = 2 * (acceleration_smoother(diff).len() / 2) + 1;
 
     // Stage 1: k2 on quasi-static samples, model mu*exp(k2 x) + F0.
     let qs: Vec<usize> = (0..n).filter(|&i| motion[i].abs() <= 0.1 * vmax).collect();
@@ -1324,12 +1500,43 @@ pub(super) fn fit_model(
     }
     let (p1, _) = gauss_newton(best.1, &qs_rows, &mut spring_only, 100)?;
 
+    // The parallel filter's rows: the moving samples whose filter reaches only moving
+    // samples (a rest's or a turn's friction is unknown). count[i]: samples before i that are
+    // not moving or are left out.
+    let spanning = |moving: &[usize], band: f64, excluded: &[bool]| -> Vec<usize> {
+        let mut count = vec![0usize; n + 1];
+        for i in 0..n {
+            let unusable = motion[i].abs() <= band || excluded[i];
+            count[i + 1] = count[i] + usize::from(unusable);
+        }
+        moving
+            .iter()
+            .copied()
+            .filter(|&s| s >= reach && s + reach < n && count[s + reach + 1] == count[s - reach])
+            .collect()
+    };
+    // The regression is chosen once, on the first band: through the parallel filter where its
+    // rows are at least [`PARALLEL_MIN_SHARE`] of the moving samples. Its columns are made
+    // only then.
+    let par = {
+        let moving: Vec<usize> = (0..n).filter(|&i| motion[i].abs() > band).collect();
+        let none = vec![false; n];
+        let share = spanning(&moving, band, &none).len() as f64;
+        (share >= PARALLEL_MIN_SHARE * moving.len() as f64)
+            .then(|| parallel_columns(&all, diff, noise, dt))
+    };
+
     // Stages 2 and 3 on the samples moving faster than `band`.
     let dynamic_fit = |band: f64, excluded: &[bool], fit_m: bool| -> Result<_, IdentifyError> {
         // Stage 2: the paper's WLS with k2 fixed, on the samples whose friction sign is known.
         let moving: Vec<usize> = (0..n)
             .filter(|&i| motion[i].abs() > band && !excluded[i])
             .collect();
+        let moving = if par.is_some() {
+            spanning(&moving, band, excluded)
+        } else {
+            moving
+        };
         let needed = 20 * 7;
         if moving.len() < needed {
             return Err(IdentifyError::TooLittleMotion {
@@ -1338,7 +1545,10 @@ pub(super) fn fit_model(
                 band_mm_s: band,
             });
         }
-        let rows = all.subset(&moving, true);
+        let mut rows = match &par {
+            Some(par) => all.parallel(&moving, par, p1[K2]),
+            None => all.subset(&moving, true),
+        };
         let mut active = [fit_m, true, true, true, true, true, false];
         let mut p = p1;
         let mut not_identifiable = Vec::new();
@@ -1366,8 +1576,22 @@ pub(super) fn fit_model(
         // Stage 3: joint refinement with k2.
         active[K2] = true;
         not_identifiable.extend(prune_all(&mut p, &rows, &mut active, &weights));
-        let (p, dropped) = gauss_newton(p, &rows, &mut active, 100)?;
+        let (mut p, dropped) = gauss_newton(p, &rows, &mut active, 100)?;
         not_identifiable.extend(dropped);
+        // The filtered exponential is a Taylor sum about the k2 its moments were summed at:
+        // summed again where the fit ended, and the fit repeated, until k2 stays.
+        for _ in 0..4 {
+            let (Some(par), Some(k2_ref)) = (&par, rows.filtered.as_ref().map(|f| f.k2_ref)) else {
+                break;
+            };
+            if (p[K2] - k2_ref).abs() <= 1e-9 * p[K2].abs() {
+                break;
+            }
+            rows.refresh_moments(&all, par, p[K2]);
+            let (next, dropped) = gauss_newton(p, &rows, &mut active, 100)?;
+            p = next;
+            not_identifiable.extend(dropped);
+        }
         Ok((rows, p, active, not_identifiable, paper_covariance_k2_fixed))
     };
     let fit_m = inertia == Inertia::Fitted;
@@ -1477,7 +1701,18 @@ pub(super) fn fit_model(
         .fold(1.0_f64, f64::min);
     let m = rows.f.len();
     let reduced_chi2 = reduced_chi_square(&p, &rows, &active, &weights);
-    let (cov, covariance_method) = sandwich(&p, &rows, &active, &weights, diff.window())
+    // Residuals share noise over the position kernel's window, widened by the parallel
+    // filter's reach each side where the rows went through it.
+    let regression = if rows.filtered.is_some() {
+        Regression::ParallelFilter
+    } else {
+        Regression::Direct
+    };
+    let correlation_span = match regression {
+        Regression::ParallelFilter => diff.window() + 2 * reach,
+        Regression::Direct => diff.window(),
+    };
+    let (cov, covariance_method) = sandwich(&p, &rows, &active, &weights, correlation_span)
         .ok_or_else(|| IdentifyError::NoConvergence("singular covariance".into()))?;
     let eig = eigenvalues(scaled(&jtj, &active)).ok_or_else(|| {
         IdentifyError::NoConvergence(
@@ -1495,7 +1730,7 @@ pub(super) fn fit_model(
         .collect();
     let adequacy = Adequacy::new(
         reduced_chi2,
-        whiteness(&residuals, &rows.index, diff.window()),
+        whiteness(&residuals, &rows.index, correlation_span),
     );
     let parameters = Estimates(std::array::from_fn(|k| {
         if active[k] {
@@ -1513,7 +1748,7 @@ pub(super) fn fit_model(
     let idx: Vec<usize> = (0..7).filter(|&k| active[k]).collect();
     not_identifiable.sort();
     not_identifiable.dedup();
-    let inertia_attenuation = if active[M] {
+    let inertia_attenuation = if active[M] && regression == Regression::Direct {
         inertia_attenuation(diff, &all.xdd, &rows, &weights)
     } else {
         None
@@ -1553,7 +1788,52 @@ pub(super) fn fit_model(
         reduced_chi2_noise_change: 0.0,
         signal_share,
         inertia_attenuation,
+        regression,
     })
+}
+
+/// The least share of the moving samples whose parallel filter reaches only moving samples
+/// at which identification regresses through the parallel filter ([`Regression`]).
+pub const PARALLEL_MIN_SHARE: f64 = 0.75;
+
+/// The smoother `q` at every second sample (consecutive samples, centred), and the force's
+/// filter: that after the three-sample mean.
+fn force_filter(q: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    let reach = 2 * (q.len() / 2);
+    let mut q_full = vec![0.0; 2 * reach + 1];
+    for (j, w) in q.iter().enumerate() {
+        q_full[2 * j] = *w;
+    }
+    let mut qt = vec![0.0; 2 * reach + 3];
+    for (i, w) in q_full.iter().enumerate() {
+        for k in 0..3 {
+            qt[i + k] += w / 3.0;
+        }
+    }
+    (q_full, qt)
+}
+
+/// Every sample's columns through the parallel filter (see [`Regression::ParallelFilter`]).
+fn parallel_columns(all: &Rows, diff: &Differentiator, noise: &SensorNoise, dt: f64) -> Parallel {
+    let q = acceleration_smoother(diff);
+    let (q_full, qt) = force_filter(&q);
+    let cube: Vec<f64> = all
+        .xd
+        .iter()
+        .map(|&v| unbiased_cube(v, all.var_xd))
+        .collect();
+    let var = noise.position_variance_mm2;
+    Parallel {
+        f: parallel_filter(&qt, &all.f),
+        sgn: parallel_filter(&qt, &all.sgn),
+        xd: parallel_filter(&qt, &all.xd),
+        cube: parallel_filter(&qt, &cube),
+        var_x: diff.smoothed_noise_variance(sg::POSITION, &q_full, var, dt),
+        var_f: noise.force_variance_n2 * qt.iter().map(|w| w * w).sum::<f64>(),
+        var_xd: diff.smoothed_noise_variance(sg::VELOCITY, &qt, var, dt),
+        curvature: dt * dt / 3.0,
+        q,
+    }
 }
 
 /// The least share of the acceleration regressor's weighted power that is signal (not the
@@ -1733,6 +2013,90 @@ fn normal_tail(z: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Position, velocity and acceleration at time `t` of a motion whose jerk is `jerks[k]`
+    /// from `starts[k]` on (starts increasing, from rest at 0), integrated exactly.
+    fn jerk_limited(starts: &[f64], jerks: &[f64], t: f64) -> (f64, f64, f64) {
+        let (mut x, mut v, mut a) = (0.0, 0.0, 0.0);
+        for (k, (&s, &j)) in starts.iter().zip(jerks).enumerate() {
+            let end = starts.get(k + 1).copied().unwrap_or(f64::INFINITY);
+            let d = (t.min(end) - s).max(0.0);
+            x += v * d + a * d * d / 2.0 + j * d * d * d / 6.0;
+            v += a * d + j * d * d / 2.0;
+            a += j * d;
+        }
+        (x, v, a)
+    }
+
+    #[test]
+    fn through_the_parallel_filter_the_inertia_force_matches_the_filtered_acceleration() {
+        // S-curve moves: jerk steps every 0.1 s, most between samples (dt 0.01 s), so the
+        // acceleration has corners the quintic kernel rounds. With F = m xdd exactly, the
+        // force at each sample differs from m times the filtered acceleration by the
+        // rounding; through Q after the three-sample mean it matches to the three-sample
+        // mean's fourth-order error.
+        let dt = 0.01;
+        let mut starts = Vec::new();
+        let mut jerks = Vec::new();
+        for k in 0..40 {
+            let t0 = 0.2 + 0.9 * k as f64 + 0.0037 * k as f64;
+            let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
+            for (i, j) in [800.0, 0.0, -800.0, 0.0, -800.0, 0.0, 800.0, 0.0]
+                .iter()
+                .enumerate()
+            {
+                starts.push(t0 + 0.1 * i as f64);
+                jerks.push(sign * j);
+            }
+        }
+        let n = 3800;
+        let samples: Vec<(f64, f64, f64)> = (0..n)
+            .map(|i| jerk_limited(&starts, &jerks, i as f64 * dt))
+            .collect();
+        let m = 0.25;
+        let x: Vec<f64> = samples.iter().map(|s| s.0).collect();
+        let force: Vec<f64> = samples.iter().map(|s| m * s.2).collect();
+        let peak = force.iter().fold(0.0_f64, |p, f| p.max(f.abs()));
+        for window in [21, 43, 85] {
+            let diff = Differentiator::new(window);
+            let xdd = diff.apply(&x, dt, sg::ACCELERATION);
+            let h = diff.half;
+            let (_, qt) = force_filter(&acceleration_smoother(&diff));
+            let filtered = parallel_filter(&qt, &force[h..h + xdd.len()]);
+            let (mut direct, mut parallel) = (0.0_f64, 0.0_f64);
+            // m fitted to each (sum a F / sum a^2) over the rows both have.
+            let (mut aa, mut af_direct, mut af_parallel) = (0.0, 0.0, 0.0);
+            for (i, a) in xdd.iter().enumerate() {
+                if filtered[i].is_finite() {
+                    direct = direct.max((force[h + i] - m * a).abs());
+                    parallel = parallel.max((filtered[i] - m * a).abs());
+                    aa += a * a;
+                    af_direct += a * force[h + i];
+                    af_parallel += a * filtered[i];
+                }
+            }
+            // Pointwise, a corner between samples leaves an error first order in dt (the
+            // three-sample mean is not the triangle there); over the rows it averages out.
+            assert!(
+                direct > 0.05 * peak,
+                "window {window}: direct {direct} of {peak}"
+            );
+            assert!(
+                parallel < 0.05 * direct && parallel < 5e-3 * peak,
+                "window {window}: parallel {parallel}, direct {direct}"
+            );
+            let bias_direct = af_direct / aa / m - 1.0;
+            let bias_parallel = af_parallel / aa / m - 1.0;
+            assert!(
+                bias_direct > 2e-3,
+                "window {window}: direct m {bias_direct}"
+            );
+            assert!(
+                bias_parallel.abs() < 1e-4,
+                "window {window}: parallel m {bias_parallel}"
+            );
+        }
+    }
 
     #[test]
     fn the_acceleration_smoother_applied_to_the_second_difference_is_the_kernel() {

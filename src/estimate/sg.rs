@@ -142,6 +142,20 @@ impl Differentiator {
         var * self.weights[k].iter().map(|w| w * w).sum::<f64>() / dt.powi(2 * Self::order(k))
     }
 
+    /// Variance, for white input noise of variance `var` sampled every `dt`, of `smoother`
+    /// (weights at consecutive samples, centred) applied to output `k`: the noise of a
+    /// regressor filtered in parallel with the force.
+    pub fn smoothed_noise_variance(&self, k: usize, smoother: &[f64], var: f64, dt: f64) -> f64 {
+        let w = &self.weights[k];
+        let mut combined = vec![0.0; w.len() + smoother.len() - 1];
+        for (j, q) in smoother.iter().enumerate() {
+            for (i, wi) in w.iter().enumerate() {
+                combined[i + j] += q * wi;
+            }
+        }
+        var * combined.iter().map(|v| v * v).sum::<f64>() / dt.powi(2 * Self::order(k))
+    }
+
     /// Derivative order of kernel `k`.
     fn order(k: usize) -> i32 {
         match k {

@@ -7,7 +7,9 @@ use serde_json::{json, Map, Value};
 
 use super::plot::{self, Panel, Series};
 use crate::estimate::ekf::{idx, EkfRow, EkfRun, EkfSettings, STATE_NAMES};
-use crate::estimate::identify::{Identification, Param, WindowMethod, TRANSIENT_SIGMAS};
+use crate::estimate::identify::{
+    Identification, Param, Regression, WindowMethod, TRANSIENT_SIGMAS,
+};
 use crate::estimate::noise::{NoiseModel, NoiseOrigin, ResolvedNoise};
 use crate::estimate::pipeline::EstimateRun;
 use crate::verdict::validate::{spring_force_n, CurveValidation, Validation};
@@ -179,6 +181,7 @@ pub fn identification_json(
         "noise_std": id.noise_std,
         "signal_share": id.signal_share,
         "inertia_attenuation": id.inertia_attenuation,
+        "regression": id.regression,
         "sign_fault": id.sign_fault,
         "fit": {
             "status": id.adequacy.status,
@@ -319,6 +322,13 @@ pub fn format_identification(id: &Identification, noise: &ResolvedNoise) -> Stri
              sharper than the {:.3} s window resolves (a servo's velocity steps; a motion whose \
              speed changes smoothly lets m be identified from them), or glitches in the log.",
             id.transient_samples, TRANSIENT_SIGMAS, id.reduced_chi2_with_transients, id.sg_window_s
+        );
+    }
+    if id.regression == Regression::ParallelFilter {
+        let _ = writeln!(
+            s,
+            "  regression through the parallel filter: the force went through the acceleration \
+             filter as well, so m carries no filter bias from the motion's corners"
         );
     }
     if let Some(r) = id.inertia_attenuation {
