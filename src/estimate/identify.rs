@@ -14,6 +14,13 @@
 //! 4. A joint weighted Gauss-Newton over all seven parameters (with line search) refines k2
 //!    together with X.
 //!
+//! Where the log allows (a fine encoder: most moving samples have only moving samples within
+//! the filter's reach), steps 3 and 4 regress through the parallel filter
+//! ([`Regression::ParallelFilter`]): the force goes through the acceleration kernel's own
+//! smoother, so the inertia force is filtered alike on both sides and m carries no filter
+//! bias from the motion's corners. Elsewhere the regression is direct, and m is corrected for
+//! the acceleration filter's loss of gain ([`correct_inertia`]).
+//!
 //! Samples whose filtered velocity is within three of its noise standard deviations of zero are
 //! left out of steps 3 and 4: their friction sign is unknown (at rest, static friction is
 //! anywhere in +-d0), and guessing it biases d0 and d1.
@@ -490,7 +497,6 @@ struct Rows {
 
 /// Rows through the parallel filter ([`Parallel`]): the velocity columns filtered, and the
 /// exponential's filtered column as moments about a k2.
-#[derive(Clone)]
 struct Filtered {
     /// The filtered velocity regressor.
     xd: Vec<f64>,
