@@ -405,7 +405,8 @@ pub enum Regression {
     /// samples, which is exactly the acceleration's mean under a triangle two samples wide
     /// each side; on the samples the three-sample mean T has the same weight and spread (and
     /// is exact at a corner on a sample). So the force goes through Q after T, and every
-    /// other column with it: the velocity's as they are, the spring's as Q applied to
+    /// other column with it: the velocity's as Q applied to central differences (the
+    /// velocity's mean over two samples), the spring's as Q applied to
     /// exp(k2 x) (1 + dt^2/3 (k2 xdd + k2^2 xd^2)), whose second factor is T's effect. The
     /// inertia force has then been through the same filter on both sides, and m carries no
     /// filter bias. A row's filter must reach only moving samples (a rest's or a turn's
@@ -508,6 +509,8 @@ struct Filtered {
     k2_ref: f64,
     /// Noise variance of the filtered velocity column.
     var_xd: f64,
+    /// Noise variance of the velocity before the filter (one central difference).
+    var_difference: f64,
 }
 
 impl Rows {
@@ -552,6 +555,7 @@ impl Rows {
             moments: exp_moments(self, par, &rows.index, k2),
             k2_ref: k2,
             var_xd: par.var_xd,
+            var_difference: par.var_difference,
         });
         rows
     }
@@ -582,6 +586,8 @@ struct Parallel {
     var_f: f64,
     /// Noise variance of the filtered velocity.
     var_xd: f64,
+    /// Noise variance of one central difference, before the filter.
+    var_difference: f64,
 }
 
 /// The filter `kernel` (consecutive samples, centred) applied to `y`: NaN within its half
@@ -710,29 +716,29 @@ fn row_correction(r: &Rows, i: usize, active: &Active) -> M7 {
     if active[M] {
         c[(M, M)] = r.var_xdd;
     }
-    let s2 = r.var_xd;
-    if s2 > 0.0 {
-        let o2 = r.xd[i] * r.xd[i];
-        let v2 = o2 - s2;
-        let v4 = o2 * o2 - 6.0 * o2 * s2 + 3.0 * s2 * s2;
+    // The velocity column o, its noise variance, and the noise variance of the velocity the
+    // cube was taken of, per sample. Through the parallel filter the column is Q applied to
+    // central differences: to first order in the noise (the velocity nearly constant over the
+    // filter) each entry is the filtered variance's; the cube's higher-order terms scale from
+    // the difference's own variance alike.
+    let (o, var_o, s2) = match &r.filtered {
+        Some(q) => (q.xd[i], q.var_xd, q.var_difference),
+        None => (r.xd[i], r.var_xd, r.var_xd),
+    };
+    if var_o > 0.0 && s2 > 0.0 {
+        let scale = var_o / s2;
+        let o2 = o * o;
+        let v2 = o2 - var_o;
+        let v4 = o2 * o2 - 6.0 * o2 * var_o + 3.0 * var_o * var_o;
         if active[D1] {
-            c[(D1, D1)] = s2;
+            c[(D1, D1)] = var_o;
         }
         if active[D1] && active[D2] {
-            c[(D1, D2)] = 3.0 * v2 * s2;
+            c[(D1, D2)] = 3.0 * v2 * var_o;
             c[(D2, D1)] = c[(D1, D2)];
         }
         if active[D2] {
-            c[(D2, D2)] = 9.0 * v4 * s2 + 18.0 * v2 * s2 * s2 + 6.0 * s2 * s2 * s2;
-        }
-        // Through the parallel filter the columns' noise is the filtered velocity's: to first
-        // order in the noise (the velocity nearly constant over the filter) each entry scales
-        // with its variance.
-        if let Some(q) = &r.filtered {
-            let scale = q.var_xd / s2;
-            for (a, b) in [(D1, D1), (D1, D2), (D2, D1), (D2, D2)] {
-                c[(a, b)] *= scale;
-            }
+            c[(D2, D2)] = 9.0 * v4 * var_o + (18.0 * v2 * s2 * s2 + 6.0 * s2 * s2 * s2) * scale;
         }
     }
     c
@@ -1529,7 +1535,7 @@ pub(super) fn fit_model(
         let none = vec![false; n];
         let share = spanning(&moving, band, &none).len() as f64;
         (share >= PARALLEL_MIN_SHARE * moving.len() as f64)
-            .then(|| parallel_columns(&all, diff, noise, dt))
+            .then(|| parallel_columns(&all, &log.position_mm, h, diff, noise, dt))
     };
 
     // Stages 2 and 3 on the samples moving faster than `band`.
@@ -1820,23 +1826,57 @@ fn force_filter(q: &[f64]) -> (Vec<f64>, Vec<f64>) {
 }
 
 /// Every sample's columns through the parallel filter (see [`Regression::ParallelFilter`]).
-fn parallel_columns(all: &Rows, diff: &Differentiator, noise: &SensorNoise, dt: f64) -> Parallel {
+///
+/// The velocity columns are Q applied to the central difference (x(t + dt) - x(t - dt)) /
+/// (2 dt) at Q's taps, and to its unbiased cube: the difference is exactly the velocity's mean
+/// over two samples, so unlike the velocity kernel it does not distort the motion as the
+/// window grows; it reads the samples at odd offsets from the row, whose noise the
+/// acceleration's (even offsets) does not share. `positions`: the logged positions, sample i
+/// of `all` at `positions[i + offset]`.
+fn parallel_columns(
+    all: &Rows,
+    positions: &[f64],
+    offset: usize,
+    diff: &Differentiator,
+    noise: &SensorNoise,
+    dt: f64,
+) -> Parallel {
     let q = acceleration_smoother(diff);
     let (q_full, qt) = force_filter(&q);
-    let cube: Vec<f64> = all
-        .xd
-        .iter()
-        .map(|&v| unbiased_cube(v, all.var_xd))
-        .collect();
     let var = noise.position_variance_mm2;
+    let var_difference = var / (2.0 * dt * dt);
+    let difference: Vec<f64> = (0..all.x.len())
+        .map(|i| {
+            let at = i + offset;
+            match (
+                at.checked_sub(1).and_then(|b| positions.get(b)),
+                positions.get(at + 1),
+            ) {
+                (Some(before), Some(after)) => (after - before) / (2.0 * dt),
+                _ => f64::NAN,
+            }
+        })
+        .collect();
+    let cube: Vec<f64> = difference
+        .iter()
+        .map(|&v| unbiased_cube(v, var_difference))
+        .collect();
+    // The central difference's weights through Q: Q's taps at even offsets, each the
+    // difference of its two odd neighbours.
+    let mut through_q = vec![0.0; q_full.len() + 2];
+    for (i, w) in q_full.iter().enumerate() {
+        through_q[i] -= w / (2.0 * dt);
+        through_q[i + 2] += w / (2.0 * dt);
+    }
     Parallel {
         f: parallel_filter(&qt, &all.f),
         sgn: parallel_filter(&qt, &all.sgn),
-        xd: parallel_filter(&qt, &all.xd),
-        cube: parallel_filter(&qt, &cube),
+        xd: parallel_filter(&q_full, &difference),
+        cube: parallel_filter(&q_full, &cube),
         var_x: diff.smoothed_noise_variance(sg::POSITION, &q_full, var, dt),
         var_f: noise.force_variance_n2 * qt.iter().map(|w| w * w).sum::<f64>(),
-        var_xd: diff.smoothed_noise_variance(sg::VELOCITY, &qt, var, dt),
+        var_xd: var * through_q.iter().map(|w| w * w).sum::<f64>(),
+        var_difference,
         curvature: dt * dt / 3.0,
         q,
     }
