@@ -738,7 +738,9 @@ fn row_correction(r: &Rows, i: usize, active: &Active) -> M7 {
             c[(D2, D1)] = c[(D1, D2)];
         }
         if active[D2] {
-            c[(D2, D2)] = 9.0 * v4 * var_o + (18.0 * v2 * s2 * s2 + 6.0 * s2 * s2 * s2) * scale;
+            // (In this order the direct rows' sum is the one it always was, to the last bit.)
+            c[(D2, D2)] =
+                9.0 * v4 * var_o + 18.0 * v2 * s2 * s2 * scale + 6.0 * s2 * s2 * s2 * scale;
         }
     }
     c
