@@ -544,20 +544,28 @@ impl Rows {
     /// filter, the exponential's moments summed at `k2`.
     fn parallel(&self, keep: &[usize], par: &Parallel, k2: f64) -> Rows {
         let pick = |v: &Vec<f64>| keep.iter().map(|&i| v[i]).collect::<Vec<f64>>();
-        let mut rows = self.subset(keep, true);
-        rows.f = pick(&par.f);
-        rows.sgn = pick(&par.sgn);
-        rows.var_x = par.var_x;
-        rows.var_f = par.var_f;
-        rows.filtered = Some(Filtered {
-            xd: pick(&par.xd),
-            cube: pick(&par.cube),
-            moments: exp_moments(self, par, &rows.index, k2),
-            k2_ref: k2,
-            var_xd: par.var_xd,
-            var_difference: par.var_difference,
-        });
-        rows
+        let index: Vec<usize> = keep.iter().map(|&i| self.index[i]).collect();
+        let moments = exp_moments(self, par, &index, k2);
+        Rows {
+            index,
+            x: pick(&self.x),
+            xd: pick(&self.xd),
+            xdd: pick(&self.xdd),
+            f: pick(&par.f),
+            sgn: pick(&par.sgn),
+            var_x: par.var_x,
+            var_xd: self.var_xd,
+            var_xdd: self.var_xdd,
+            var_f: par.var_f,
+            filtered: Some(Filtered {
+                xd: pick(&par.xd),
+                cube: pick(&par.cube),
+                moments,
+                k2_ref: k2,
+                var_xd: par.var_xd,
+                var_difference: par.var_difference,
+            }),
+        }
     }
 
     /// Sums the exponential's moments again at `k2` (`all`: every sample's rows).
