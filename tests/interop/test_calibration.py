@@ -166,29 +166,45 @@ def test_the_filter_recovers_where_a_short_window_leaves_the_inertia_and_cubic_d
     assert abs(k2_z) < 3.0, (final["k2_per_mm"], final["k2_per_mm_std"], truth["k2"])
 
 
-def test_an_inertia_disagreement_names_identifications_lean_when_the_filter_is_the_precise_one(tmp_path):
-    """The Table I transmission on jerk-limited moves, seed 2: identification's m is 3.2 of its
-    standard deviations high while the filter's M is right (within 0.2 of its own). The filter
-    flags the disagreement, and its reason names identification's lean as a cause instead of
-    sending the user to identification's M (it does not say which one is off: on a light
-    transmission's trapezoids with strong friction it was the filter's). (Until identification took the sensor noise from the log, the
-    case was the sines of seed 1; there identification's m is now 2.5 high.)"""
+def test_an_inertia_disagreement_does_not_say_which_is_off_and_keeps_the_spring_law(tmp_path):
+    """The Table I transmission on jerk-limited moves. Where the filter's M and identification's
+    m disagree beyond 3 standard deviations and nothing else does, the reason says that either
+    can be the one that is off, and that k2 agrees, so identify's spring law is the one to use.
+
+    - Paper noise, seed 2: identification's m is 3.2 of its standard deviations high. The
+      filter's M was right and flagged the disagreement. Since the friction stage reads a held
+      sample as possibly still sliding (2026-11-27), the filter's M is nearer the truth and
+      the disagreement is 2.8 sigma: consistent, M within 1.5 of its own.
+    - A 1 um encoder and a quiet load cell, seed 0: here the filter's M is the one off (0.13 %
+      high, 21 of its own raw standard deviations), identification's within 1.1 of its own.
+      The reason must not blame identification, and identify's k2 is right."""
     tr = MATRIX_ROWS["table-I"]
     t, f, x, truth = run(tr, Rig(seed=2), "scurve", 300.0)
     log = tmp_path / "table-I-scurve-2.csv"
     write_rig_log(log, t, f, x)
     est = camspring("estimate", log, "--json", "-o", tmp_path / "est.csv")
-    assert est.returncode == 1, est.stderr
     j = json.loads(est.stdout)
     final = j["final"]
     m_z = (final["m_n_s2_per_mm"] - truth["m"]) / final["m_n_s2_per_mm_std"]
     assert abs(m_z) < 1.5, (final["m_n_s2_per_mm"], final["m_n_s2_per_mm_std"])
+    if est.returncode == 1:
+        (reason,) = j["consistency"]["reasons"]
+        assert "either can be the one that is off" in reason and "k2 agrees" in reason, reason
+    else:
+        assert est.returncode == 0 and j["consistency"]["consistent"], est.stderr
+
+    t, f, x, truth = run(tr, Rig(seed=0, force_variance=0.017e-2, position_variance=1e-6), "scurve", 300.0)
+    log = tmp_path / "table-I-scurve-0-fine.tsv"
+    write_rig_log(log, t, f, x, style="tab")
+    est = camspring("estimate", log, "--json", "-o", tmp_path / "est-fine.csv")
+    assert est.returncode == 1, est.stderr
+    j = json.loads(est.stdout)
     (reason,) = j["consistency"]["reasons"]
-    assert "identification's inertia comes from a smoothed acceleration" in reason and "k2 agrees" in reason, reason
-    # The case stands on identification's m being the one that is off: once it is not, this
-    # log no longer flags and the test needs another case.
+    assert "m_n_s2_per_mm" in reason and "either can be the one that is off" in reason, reason
+    assert "k2 agrees, so use identify's spring law" in reason, reason
     ident = json.loads(camspring("identify", log, "--json").stdout)["parameters"]
-    assert (ident["m_n_s2_per_mm"] - truth["m"]) / ident["m_n_s2_per_mm_std"] > 2.5, ident
+    k2_z = (ident["k2_per_mm"] - truth["k2"]) / ident["k2_per_mm_std"]
+    assert abs(k2_z) < 3.0 and abs(ident["k2_per_mm"] / truth["k2"] - 1.0) < 0.005, ident
 
 
 def identified_log(path, tr, rig, profile):
@@ -382,7 +398,8 @@ def test_a_pass_the_log_cannot_show_is_said_to_be_not_conclusive(tmp_path):
     1.2 %, and a law with k2 5 % high passed at a 3 % tolerance (k2 2.9 % beyond two standard
     deviations, force_max 2.8 %) as cleanly as the true one. A pass the log cannot tell from a
     build off by more than the tolerance is now "not conclusive", with each criterion's upper
-    bound; the true law's pass is shown, and a law 12 % off fails."""
+    bound; the true law's pass is shown, a law 4 % off passes not conclusively, one 5 % off
+    is never a shown pass, and one 12 % off fails."""
     tr = Transmission(m=0.0356, d0=2.415, d1=0.1149, d2=0.0, mu=0.7041, k2=0.15631, f0=11.305)
     t, f, x, _ = run(tr, Rig(seed=0, force_variance=0.0466, position_variance=0.0274), "multisine", 300.0)
     log = tmp_path / "weak.tsv"
@@ -391,13 +408,18 @@ def test_a_pass_the_log_cannot_show_is_said_to_be_not_conclusive(tmp_path):
     assert rc == 0 and right["pass"] and right["conclusive"], right["criteria"]
     k2 = next(c for c in right["criteria"] if c["name"] == "k2")
     assert k2["deviation_upper_percent"] < 3.0, k2
+    # Never a shown pass of a law 5 % off: a fail, or (until 2026-11-27, at a k2 deviation of
+    # 2.9 % against the 3 % tolerance) a pass that says it is not shown.
     rc, wrong = validate_json(tmp_path, tr, log, 1.05)
-    # Never a shown pass of the wrong law; on this log it is a pass that says it is not shown.
     assert not (wrong["pass"] and wrong["conclusive"]), wrong["criteria"]
-    assert rc == 0 and not wrong["conclusive"], wrong["criteria"]
+    assert rc == (0 if wrong["pass"] else 1), wrong["criteria"]
+    # A law 4 % off lies within the tolerance by the log's estimate (about 2 %), but the log
+    # cannot show the build within it.
+    rc, wrong = validate_json(tmp_path, tr, log, 1.04)
+    assert rc == 0 and wrong["pass"] and not wrong["conclusive"], wrong["criteria"]
     k2 = next(c for c in wrong["criteria"] if c["name"] == "k2")
     assert k2["deviation_upper_percent"] > 5.0, k2
-    text = camspring("validate", spec(tmp_path / "off.toml", tr, 1.05), log, "--tolerance", "3%").stdout
+    text = camspring("validate", spec(tmp_path / "off.toml", tr, 1.04), log, "--tolerance", "3%").stdout
     assert text.startswith("PASS, NOT CONCLUSIVE") and "not conclusive: k2 is not shown" in text, text
     rc, far = validate_json(tmp_path, tr, log, 1.12)
     assert rc == 1 and not far["pass"], far["criteria"]
