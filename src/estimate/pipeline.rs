@@ -2058,13 +2058,10 @@ mod tests {
         }
     }
 
-    /// A motion controller's move: held at 5 mm (static friction +d0 from the last move),
-    /// then a trapezoidal move to 10 mm whose acceleration steps (5.6 mm/s^2, 4.2 mm/s), then
-    /// held again. The zero-phase kernels smear the steps half a window into both holds; the
-    /// stage reads a rest next to a move as a hold, so what goes on to the filter there is the
-    /// spring's force. Read with the smeared motion (as a passing), the held rod's force
-    /// carried m times the smeared acceleration, up to about 1 N, leading the move and
-    /// lagging the stop.
+    /// A jerk-limited move between holds: its first and last samples lie within the velocity
+    /// band while the rod moves. The stage reads them as possibly still sliding, so what goes
+    /// on to the filter keeps their inertia and damping force; read as static alone, up to
+    /// 1.15 N of it was taken for static friction.
     #[test]
     fn a_jerk_limited_move_keeps_its_inertia_force_where_its_velocity_is_within_the_band() {
         use rand_distr::Distribution;
@@ -2133,6 +2130,13 @@ mod tests {
         }
     }
 
+    /// A motion controller's move: held at 5 mm (static friction +d0 from the last move),
+    /// then a trapezoidal move to 10 mm whose acceleration steps (5.6 mm/s^2, 4.2 mm/s), then
+    /// held again. The zero-phase kernels smear the steps half a window into both holds; the
+    /// stage reads a rest next to a move as a hold, so what goes on to the filter there is the
+    /// spring's force. Read with the smeared motion (as a passing), the held rod's force
+    /// carried m times the smeared acceleration, up to about 1 N, leading the move and
+    /// lagging the stop.
     #[test]
     fn a_held_rod_next_to_a_move_with_acceleration_steps_leaves_the_spring_force() {
         use rand_distr::Distribution;
