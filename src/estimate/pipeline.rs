@@ -344,7 +344,9 @@ impl FrictionlessModel {
 /// and the rod still sliding in the last motion's direction or already in the next's
 /// ([`CoulombStage::emit_rest`]). Moving, the friction is d0 times the most probable sign of -1, 0 and +1, with the
 /// velocity's direction the likeliest (the zero-phase window smears a start or a stop half a
-/// window in time, so the other two stay possible). Without a model (an init from a law, which
+/// window in time, so the other two stay possible). As a move begins after a rest, until a
+/// short kernel ([`StickKernel`]) sees the rod move, static friction anywhere in +-d0 is a
+/// fourth candidate: the window's velocity runs up to half a window ahead of a breakaway. Without a model (an init from a law, which
 /// has no friction) samples pass through.
 ///
 /// Samples come out in order, lagging the input by half a window; the first half window takes
@@ -362,6 +364,12 @@ struct CoulombStage {
     dt: f64,
     band: f64,
     reach: usize,
+    /// The short kernel that tells whether the rod still stands as a move begins.
+    stick: Option<StickKernel>,
+    /// The stick kernel's reading at the samples being emitted: the rod stands.
+    standing: bool,
+    /// A move has begun after a rest, and the stick kernel has not yet seen the rod move.
+    starting: bool,
     positions: sg::SlidingWindow,
     waiting: VecDeque<(usize, Sample)>,
     last: Option<[f64; 3]>,
@@ -386,6 +394,56 @@ struct CoulombStage {
 enum Rest {
     Hold,
     Passing,
+}
+
+/// A short motion-velocity kernel centred in the stage's window: where a move begins after a
+/// rest, the stage's own velocity, smoothed over identification's window, is past its band up
+/// to half a window before the rod moves ([`CoulombStage::emit`]).
+#[derive(Debug, Clone)]
+struct StickKernel {
+    weights: Vec<f64>,
+    taps: (usize, usize),
+    half: usize,
+    /// Three standard deviations of its velocity noise (mm/s).
+    band: f64,
+}
+
+/// The shortest stick kernel: its velocity is a quintic fitted to the window's odd offsets,
+/// which needs at least six of them (at 13 samples the fit interpolates).
+pub const STICK_KERNEL_SHORTEST: usize = 15;
+
+impl StickKernel {
+    /// The shortest kernel (from [`STICK_KERNEL_SHORTEST`], by factors of sqrt 2) whose band
+    /// keeps the damper's force within a quarter of d0, the resolution the stage asks of its
+    /// model; none if only the stage's own window (`longest` samples) would.
+    fn new(d1: f64, d0: f64, position_variance_mm2: f64, dt: f64, longest: usize) -> Option<Self> {
+        let mut window = STICK_KERNEL_SHORTEST;
+        while window < longest {
+            let diff = sg::Differentiator::new(window);
+            let band = 3.0
+                * diff
+                    .noise_variance(sg::MOTION_VELOCITY, position_variance_mm2, dt)
+                    .sqrt();
+            if band > 0.0 && d1.abs() * band <= 0.25 * d0.abs() {
+                return Some(StickKernel {
+                    weights: diff.weights[sg::MOTION_VELOCITY].clone(),
+                    taps: diff.taps(sg::MOTION_VELOCITY),
+                    half: diff.half,
+                    band,
+                });
+            }
+            window = (window as f64 * std::f64::consts::SQRT_2) as usize | 1;
+        }
+        None
+    }
+
+    /// Whether the rod stands at the centre of `positions` (an odd number of samples, at
+    /// least the kernel's window), sampled every `dt` seconds.
+    fn stands(&self, positions: &[f64], dt: f64) -> bool {
+        let centre = positions.len() / 2;
+        let window = &positions[centre - self.half..=centre + self.half];
+        (sg::strided_sum(&self.weights, self.taps, window, 1) / dt).abs() <= self.band
+    }
 }
 
 /// The most points of the kernels that give the friction's sign.
@@ -448,6 +506,15 @@ impl CoulombStage {
                     dt * stride as f64,
                 )
                 .sqrt();
+        let stick = model.and_then(|m| {
+            StickKernel::new(
+                m.d1_n_s_per_mm,
+                d0,
+                noise.position_variance_mm2,
+                dt,
+                diff.window() * stride,
+            )
+        });
         CoulombStage {
             d0,
             model,
@@ -466,6 +533,9 @@ impl CoulombStage {
             dt: dt * stride as f64,
             band,
             reach: diff.half * stride,
+            stick,
+            standing: false,
+            starting: false,
             positions: sg::SlidingWindow::new(2 * diff.half * stride + 1),
             waiting: VecDeque::new(),
             last: None,
@@ -496,6 +566,10 @@ impl CoulombStage {
         }
         smoothed[1] /= self.dt;
         smoothed[2] /= self.dt * self.dt;
+        self.standing = self
+            .stick
+            .as_ref()
+            .is_some_and(|k| k.stands(self.positions.values(), self.sample_dt));
         let centre = i - self.reach;
         // The first smoothed values also stand for the samples before their centre.
         while let Some(&(j, _)) = self.waiting.front() {
@@ -548,6 +622,7 @@ impl CoulombStage {
         }
         let direction = v.signum();
         if !self.rest.is_empty() {
+            self.starting = true;
             let passing = !self.holding
                 && self.last_motion.is_some_and(|(before, a)| {
                     before == -direction
@@ -574,6 +649,10 @@ impl CoulombStage {
                 // (A stuck state with its friction anywhere in +-d0 as a fourth candidate
                 // was worse: where identification's damping is off, sliding samples were
                 // taken as stuck.)
+                let static_possible = self.starting && self.standing;
+                if !self.standing {
+                    self.starting = false;
+                }
                 let candidates: &[(f64, f64)] = if direction > 0.0 {
                     &[(1.0, 0.97), (0.0, 0.02), (-1.0, 0.01)]
                 } else {
@@ -583,11 +662,28 @@ impl CoulombStage {
                 let score = |&(sign, prior): &(f64, f64)| {
                     (friction - self.d0 * sign).powi(2) / var - f64::ln(prior)
                 };
-                self.d0
-                    * candidates
-                        .iter()
-                        .min_by(|p, q| score(p).total_cmp(&score(q)))
-                        .map_or(direction, |c| c.0)
+                let (sliding, sliding_score) = candidates
+                    .iter()
+                    .map(|c| (self.d0 * c.0, score(c)))
+                    .min_by(|p, q| p.1.total_cmp(&q.1))
+                    .unwrap_or((self.d0 * direction, 0.0));
+                if static_possible {
+                    // The rod may still stand as its move begins: static friction anywhere in
+                    // +-d0 (uniform) against the likeliest sign (normal, its normalisation
+                    // added, as the other candidates share it).
+                    let d0 = self.d0.abs();
+                    let held = s.force_n - model.force_n(x, 0.0, 0.0);
+                    let excess = (held.abs() - d0).max(0.0);
+                    let stuck_score = (2.0 * d0).ln() + excess * excess / var;
+                    let gauss = 0.5 * (std::f64::consts::PI * var).ln();
+                    if stuck_score < sliding_score + gauss {
+                        held.clamp(-d0, d0)
+                    } else {
+                        sliding
+                    }
+                } else {
+                    sliding
+                }
             }
         };
         self.subtract(i, s, friction_n);
@@ -2055,6 +2151,81 @@ mod tests {
         for span in out.chunks(500) {
             let mean = span.iter().map(|(_, s)| s.force_n - spring).sum::<f64>() / 500.0;
             assert!(mean.abs() < 0.25, "mean left over 5 s {mean:.3} N");
+        }
+    }
+
+    /// A force-controlled rod that sticks while the force on it falls, its static friction
+    /// ramping from +d0 / 2 to -d0, and then breaks away sharply (jerk 100 mm/s^3). Over
+    /// identification's long window (0.85 s) the stage's velocity is past its band up to half
+    /// a window before the rod moves; the stick kernel sees it stand, so the stage does not
+    /// take those samples as sliding. Without it, from 0.29 s before the breakaway, up to
+    /// 0.55 N of static friction reached the filter. Still weak: within the last 0.2 s, the
+    /// rest's reading of its last samples as already sliding leaves up to 0.3 N, and the
+    /// breakaway's own sample 1.1 N.
+    #[test]
+    fn a_rod_still_sticking_before_its_breakaway_is_not_read_as_sliding() {
+        use rand_distr::Distribution;
+        let law = crate::model::ExpLaw {
+            mu_n: 0.9251,
+            k2_per_mm: 0.2586,
+            f0_n: 13.75,
+        };
+        let model = frictionless(law, 0.39, 1.84);
+        let noise = SensorNoise::new(1.7e-4, 1e-6);
+        let (d0, dt, x0, breakaway, jerk) = (3.82, 0.01, 8.0, 5.0, 100.0);
+        // (position, velocity, acceleration, friction) at time t.
+        let rod = |t: f64| -> (f64, f64, f64, f64) {
+            if t < breakaway {
+                let ramp = ((t - 2.0) / (breakaway - 2.0)).clamp(0.0, 1.0);
+                (x0, 0.0, 0.0, d0 * (0.5 - 1.5 * ramp))
+            } else {
+                let u = t - breakaway;
+                (
+                    x0 - jerk * u * u * u / 6.0,
+                    -jerk * u * u / 2.0,
+                    -jerk * u,
+                    -d0,
+                )
+            }
+        };
+        let (mut rng, fn_noise, xn_noise) = sensors(&noise, 5);
+        let n = 700;
+        let mut stage = CoulombStage::new(
+            d0,
+            Some(model),
+            law.stiffness_n_per_mm(15.0),
+            85,
+            &noise,
+            dt,
+        );
+        assert!(stage.stick.is_some());
+        let truth: Vec<(f64, f64)> = (0..n)
+            .map(|i| {
+                let (x, v, a, _) = rod(i as f64 * dt);
+                (v, model.force_n(x, v, a))
+            })
+            .collect();
+        let samples = truth.iter().enumerate().map(|(i, &(_, f))| {
+            let (x, _, _, friction) = rod(i as f64 * dt);
+            Sample {
+                t_s: i as f64 * dt,
+                force_n: f + friction + fn_noise.sample(&mut rng),
+                position_mm: x + xn_noise.sample(&mut rng),
+            }
+        });
+        let out = through_stage(&mut stage, samples);
+        assert_eq!(out.len(), n);
+        let sd = stage.predicted_std;
+        // Every sample but those within 0.2 s of the breakaway (sample 500).
+        for (i, ((_, s), &(v, f))) in out.iter().zip(&truth).enumerate() {
+            if (480..=520).contains(&i) {
+                continue;
+            }
+            let left = s.force_n - f;
+            assert!(
+                left.abs() < 4.0 * sd,
+                "sample {i} (v {v:.4} mm/s): {left:.3} N left against sd {sd:.3} N"
+            );
         }
     }
 
