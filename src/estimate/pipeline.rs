@@ -1976,6 +1976,41 @@ mod tests {
         }
     }
 
+    /// Table I's transmission (without d2) on a rig with a 1 um encoder and a load cell ten
+    /// times quieter than the paper's: the law, the frictionless model and the sensor noise.
+    fn table_i_on_a_fine_rig() -> (crate::model::ExpLaw, FrictionlessModel, SensorNoise) {
+        let law = crate::model::ExpLaw {
+            mu_n: 0.9251,
+            k2_per_mm: 0.2586,
+            f0_n: 13.75,
+        };
+        (
+            law,
+            frictionless(law, 0.39, 1.84),
+            SensorNoise::new(1.7e-4, 1e-6),
+        )
+    }
+
+    /// Asserts that what left the stage is the frictionless force of `truth` ((velocity,
+    /// force) per sample) within four standard deviations `sd`, on every sample not `skipped`.
+    fn assert_frictionless_force(
+        out: &[(usize, Sample)],
+        truth: &[(f64, f64)],
+        sd: f64,
+        skipped: impl Fn(usize) -> bool,
+    ) {
+        for (i, ((_, s), &(v, f))) in out.iter().zip(truth).enumerate() {
+            if skipped(i) {
+                continue;
+            }
+            let left = s.force_n - f;
+            assert!(
+                left.abs() < 4.0 * sd,
+                "sample {i} (v {v:.4} mm/s): {left:.3} N left against sd {sd:.3} N"
+            );
+        }
+    }
+
     /// A seeded generator with the force and position sensors' noise.
     fn sensors(
         noise: &SensorNoise,
@@ -2165,13 +2200,7 @@ mod tests {
     #[test]
     fn a_rod_still_sticking_before_its_breakaway_is_not_read_as_sliding() {
         use rand_distr::Distribution;
-        let law = crate::model::ExpLaw {
-            mu_n: 0.9251,
-            k2_per_mm: 0.2586,
-            f0_n: 13.75,
-        };
-        let model = frictionless(law, 0.39, 1.84);
-        let noise = SensorNoise::new(1.7e-4, 1e-6);
+        let (law, model, noise) = table_i_on_a_fine_rig();
         let (d0, dt, x0, breakaway, jerk) = (3.82, 0.01, 8.0, 5.0, 100.0);
         // (position, velocity, acceleration, friction) at time t.
         let rod = |t: f64| -> (f64, f64, f64, f64) {
@@ -2215,18 +2244,10 @@ mod tests {
         });
         let out = through_stage(&mut stage, samples);
         assert_eq!(out.len(), n);
-        let sd = stage.predicted_std;
         // Every sample but those within 0.2 s of the breakaway (sample 500).
-        for (i, ((_, s), &(v, f))) in out.iter().zip(&truth).enumerate() {
-            if (480..=520).contains(&i) {
-                continue;
-            }
-            let left = s.force_n - f;
-            assert!(
-                left.abs() < 4.0 * sd,
-                "sample {i} (v {v:.4} mm/s): {left:.3} N left against sd {sd:.3} N"
-            );
-        }
+        assert_frictionless_force(&out, &truth, stage.predicted_std, |i| {
+            (480..=520).contains(&i)
+        });
     }
 
     /// A jerk-limited move between holds: its first and last samples lie within the velocity
@@ -2239,13 +2260,7 @@ mod tests {
         // Table I's transmission, a fine encoder and a quiet load cell, a quintic move from 5
         // to 10 mm (velocity and acceleration rise from zero, as an S-curve's do) between holds
         // that keep the friction of the last motion (+d0, the move's way).
-        let law = crate::model::ExpLaw {
-            mu_n: 0.9251,
-            k2_per_mm: 0.2586,
-            f0_n: 13.75,
-        };
-        let model = frictionless(law, 0.39, 1.84);
-        let noise = SensorNoise::new(1.7e-4, 1e-6);
+        let (law, model, noise) = table_i_on_a_fine_rig();
         let (d0, dt, t0, duration) = (3.82, 0.01, 4.0, 1.5);
         let motion = |t: f64| -> (f64, f64, f64) {
             let u = ((t - t0) / duration).clamp(0.0, 1.0);
@@ -2291,14 +2306,7 @@ mod tests {
         assert!(slow.len() >= 6, "{} moving samples in the band", slow.len());
         // What reaches the filter is the frictionless force within four of the stage's
         // predicted standard deviations on every sample, moving or held.
-        let sd = stage.predicted_std;
-        for (i, ((_, s), &(v, f))) in out.iter().zip(&truth).enumerate() {
-            let left = s.force_n - f;
-            assert!(
-                left.abs() < 4.0 * sd,
-                "sample {i} (v {v:.4} mm/s): {left:.3} N left against sd {sd:.3} N"
-            );
-        }
+        assert_frictionless_force(&out, &truth, stage.predicted_std, |_| false);
     }
 
     /// A motion controller's move: held at 5 mm (static friction +d0 from the last move),
