@@ -540,6 +540,22 @@ fn messages_name_the_key_and_never_echo_control_characters() {
     let out = camspring(d.path(), &["identify", "calib.csv", "--window", "1ms"]);
     assert_eq!(out.status.code(), Some(2));
     assert!(stderr(&out).contains("--window"));
+    // So is one of 11 samples (at the simulator's 100 Hz): a quintic needs 6 of the window's
+    // even offsets, which 11 samples do not have (such a window once gave zero kernels, and a
+    // message that the log did not move).
+    let out = camspring(d.path(), &["identify", "calib.csv", "--window", "0.11s"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        stderr(&out).contains("needs at least 13 samples"),
+        "{}",
+        stderr(&out)
+    );
+    let out = camspring(d.path(), &["identify", "calib.csv", "--window", "0.13s"]);
+    assert!(
+        !stderr(&out).contains("does not excite"),
+        "{}",
+        stderr(&out)
+    );
     // A duplicated column, and a value that overflows after conversion, name the line.
     let log = std::fs::read_to_string(d.path().join("calib.csv")).unwrap();
     let dup = log.replacen("t_s,force_n,position_mm", "t_s,force_n,force_n", 1);

@@ -431,8 +431,10 @@ pub enum IdentifyError {
     },
     /// Produced by [`identify`] when too few samples move clearly.
     #[error(
-        "only {found} samples move faster than the velocity noise ({band_mm_s:.4} mm/s); at least {needed} \
-         are needed for the dynamic fit: record a run with motion"
+        "only {found} samples move faster than the velocity noise ({band_mm_s:.4} mm/s, through a \
+         {window_s} s Savitzky-Golay window); at least {needed} are needed for the dynamic fit: \
+         record a run with more motion, or (with --window) a longer window, whose velocity is less \
+         noisy"
     )]
     TooLittleMotion {
         /// Moving samples.
@@ -441,6 +443,8 @@ pub enum IdentifyError {
         needed: usize,
         /// The velocity band (mm/s).
         band_mm_s: f64,
+        /// The smoothing window (s) whose velocity noise sets the band.
+        window_s: f64,
     },
     /// Produced by [`identify_with_window`] for a window too short for the smoothing filter.
     #[error(
@@ -1565,6 +1569,7 @@ pub(super) fn fit_model(
                 found: moving.len(),
                 needed,
                 band_mm_s: band,
+                window_s: diff.window() as f64 * dt,
             });
         }
         let mut rows = match &par {

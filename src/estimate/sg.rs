@@ -1,5 +1,5 @@
 //! Savitzky-Golay smoothing differentiators: position, velocity and acceleration from local
-//! least-squares polynomials over a sliding window (cubic by default).
+//! least-squares polynomials (quintic) over a sliding window.
 //!
 //! Identification chooses its window from the data ([`super::window`]); the EKF's force rate
 //! uses [`window_for_rate`], about 0.4 s of data
@@ -29,32 +29,42 @@ pub const ORDER: usize = 5;
 /// Polynomial order of the velocity and acceleration filters.
 pub const ORDER_DERIVATIVES: usize = 5;
 
-/// An odd window length of about [`WINDOW_SECONDS`] at `rate_hz`, at least 9 samples.
+/// An odd window length of about [`WINDOW_SECONDS`] at `rate_hz`, at least [`MIN_WINDOW`]
+/// samples.
 pub fn window_for_rate(rate_hz: f64) -> usize {
     let n = (WINDOW_SECONDS * rate_hz).round().clamp(0.0, 1e6) as usize;
     (n | 1).max(MIN_WINDOW)
 }
 
-/// The shortest window (samples) the cubic kernels with their odd and even offsets take.
-pub const MIN_WINDOW: usize = 9;
+/// The shortest window (samples) the quintic kernels take: each of the odd and the even
+/// offsets must hold at least six samples (a 13-sample window has 6 odd and 7 even offsets; an
+/// 11-sample window has only 5 even ones, which a quintic cannot be fitted to).
+pub const MIN_WINDOW: usize = 13;
 
 /// Weights (per sample, unit spacing) of the `deriv`-th derivative at offset 0 of a polynomial
 /// of `order` fitted by least squares to the samples at `offsets`; zero elsewhere in a window
 /// of half width `half`.
+///
+/// The polynomial is fitted in the offset over the half width, so the normal matrix stays well
+/// conditioned for any window length (in raw offsets its entries would span up to 10 powers of
+/// the half width). Needs at least `order + 1` distinct offsets within `half`, which
+/// [`MIN_WINDOW`] guarantees for every kernel of [`Differentiator`].
 fn kernel(half: usize, offsets: &[i64], order: usize, deriv: usize) -> Vec<f64> {
+    let scale = half.max(1) as f64;
     let a = DMatrix::from_fn(offsets.len(), order + 1, |i, j| {
-        (offsets[i] as f64).powi(j as i32)
+        (offsets[i] as f64 / scale).powi(j as i32)
     });
     let ata = a.transpose() * &a;
-    // The Vandermonde normal matrix of distinct offsets (at least order + 1) is positive definite.
-    let pinv = match ata.cholesky() {
-        Some(c) => c.inverse() * a.transpose(),
-        None => return vec![0.0; 2 * half + 1],
-    };
+    // The normal matrix of at least order + 1 distinct points is positive definite.
+    let pinv = ata
+        .cholesky()
+        .expect("a polynomial kernel needs order + 1 distinct offsets (MIN_WINDOW)")
+        .inverse()
+        * a.transpose();
     let factorial = (1..=deriv).product::<usize>() as f64;
     let mut w = vec![0.0; 2 * half + 1];
     for (i, &o) in offsets.iter().enumerate() {
-        w[(o + half as i64) as usize] = pinv[(deriv, i)] * factorial;
+        w[(o + half as i64) as usize] = pinv[(deriv, i)] * factorial / scale.powi(deriv as i32);
     }
     w
 }
@@ -81,7 +91,8 @@ pub struct Differentiator {
 }
 
 impl Differentiator {
-    /// The differentiator over `window` samples (odd, at least 9) with cubic polynomials.
+    /// The differentiator over `window` samples (odd, at least [`MIN_WINDOW`]) with quintic
+    /// polynomials.
     pub fn new(window: usize) -> Differentiator {
         let half = (window.max(MIN_WINDOW)) / 2;
         let h = half as i64;
@@ -243,6 +254,61 @@ mod tests {
     }
 
     #[test]
+    fn every_window_from_the_shortest_differentiates_a_quintic_exactly() {
+        // A quintic is inside every kernel's polynomial space, so each kernel returns its
+        // value or derivative exactly, from the shortest window (whose odd and even offsets
+        // just hold a quintic) to one of 200 001 samples (whose raw-offset normal matrix
+        // would span 10^53).
+        let dt = 0.01;
+        for window in (MIN_WINDOW..=41).step_by(2).chain([1001, 200_001]) {
+            let d = Differentiator::new(window);
+            assert_eq!(d.window(), window);
+            let h = d.half as f64;
+            // Scaled to the window so every term matters across it.
+            let u = |t: f64| (t - h * dt) / (h * dt);
+            let f = |t: f64| {
+                let x = u(t);
+                1.0 + 2.0 * x - 3.0 * x.powi(2) + 0.5 * x.powi(3) + 1.5 * x.powi(4) - x.powi(5)
+            };
+            let df = |t: f64| {
+                let x = u(t);
+                (2.0 - 6.0 * x + 1.5 * x * x + 6.0 * x.powi(3) - 5.0 * x.powi(4)) / (h * dt)
+            };
+            let d2f = |t: f64| {
+                let x = u(t);
+                (-6.0 + 3.0 * x + 18.0 * x * x - 20.0 * x.powi(3)) / (h * dt).powi(2)
+            };
+            let n = d.window() + 4;
+            let y: Vec<f64> = (0..n).map(|i| f(i as f64 * dt)).collect();
+            for c in 0..5 {
+                let t = (c as f64 + h) * dt;
+                let pos = d.apply(&y, dt, POSITION)[c];
+                assert!(
+                    (pos - f(t)).abs() < 1e-7,
+                    "{window} position {pos} {}",
+                    f(t)
+                );
+                for k in [VELOCITY, MOTION_VELOCITY, RATE] {
+                    let v = d.apply(&y, dt, k)[c];
+                    let tol = 1e-6 * df(t).abs().max(1.0 / (h * dt));
+                    assert!(
+                        (v - df(t)).abs() < tol,
+                        "{window} kernel {k}: {v} {}",
+                        df(t)
+                    );
+                }
+                let a = d.apply(&y, dt, ACCELERATION)[c];
+                let tol = 1e-5 * d2f(t).abs().max(1.0 / (h * dt).powi(2));
+                assert!(
+                    (a - d2f(t)).abs() < tol,
+                    "{window} acceleration {a} {}",
+                    d2f(t)
+                );
+            }
+        }
+    }
+
+    #[test]
     fn kernels_have_uncorrelated_noise() {
         let d = Differentiator::new(41);
         // Every pair used together in identification is uncorrelated (hence independent for
@@ -332,6 +398,7 @@ mod tests {
     fn window_follows_the_rate() {
         assert_eq!(window_for_rate(100.0), 41);
         assert_eq!(window_for_rate(1000.0), 401);
-        assert_eq!(window_for_rate(10.0), 9);
+        // 0.4 s is 4 samples at 10 Hz: the shortest window a quintic takes instead.
+        assert_eq!(window_for_rate(10.0), 13);
     }
 }
