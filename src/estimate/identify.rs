@@ -1319,7 +1319,7 @@ fn identify_samples(
 /// the wrong sign, must be for identification to call it impossible ([`SignFault`]).
 pub const IMPOSSIBLE_SIGMAS: f64 = 5.0;
 
-/// The sensor that a fit with impossible signs likely read reversed.
+/// The sensor that a fit with impossible signs likely read reversed, if either did.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum ReversedSensor {
@@ -1327,10 +1327,14 @@ pub enum ReversedSensor {
     LoadCell,
     /// The force rises as the position falls: an encoder that counts the other way.
     Encoder,
+    /// Neither: the fitted spring force rises as it extends, which a reversed encoder would
+    /// have turned, and the force is positive. The negative inertia or damping comes from
+    /// motion the model does not describe.
+    Neither,
 }
 
 /// A fit with parameters no transmission has: a negative inertia m or damping d1, or a spring
-/// force that falls as it extends, each beyond [`IMPOSSIBLE_SIGMAS`].
+/// force that falls as it extends, each beyond [`IMPOSSIBLE_SIGMAS`], and its likely cause.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct SignFault {
     /// What is impossible: `negative inertia m`, `negative damping d1`, `spring force that
@@ -1359,6 +1363,14 @@ impl std::fmt::Display for SignFault {
                 "the likely cause is an encoder that counts the other way (the force rises as \
                  the position falls): give the position column a negative unit, --position \
                  NAME:-mm (and --position-offset auto where its zero is then unknown)"
+            ),
+            ReversedSensor::Neither => write!(
+                f,
+                "the fitted spring force rises as it extends, so neither sensor reads reversed; \
+                 the model does not describe this log's motion (likely causes: friction that \
+                 holds the rod where the log never shows it sliding, or force and position \
+                 sampled at different times); record a run that moves over the stroke, or \
+                 check the channels' timing"
             ),
         }
     }
@@ -1396,10 +1408,15 @@ fn judge_signs(id: &mut Identification, log: &CalibrationLog) {
         return;
     }
     let mean_force = log.force_n.iter().sum::<f64>() / log.force_n.len().max(1) as f64;
+    // A reversed encoder turns the spring too: its fitted force falls as the position rises.
+    // A fit whose spring rises (even one the log resolves poorly) read the encoder right.
+    let spring_rises = mu.zip(k2).is_some_and(|(mu, k2)| mu * k2 > 0.0);
     let fault = SignFault {
         found,
         likely: if mean_force < 0.0 {
             ReversedSensor::LoadCell
+        } else if spring_rises {
+            ReversedSensor::Neither
         } else {
             ReversedSensor::Encoder
         },
@@ -2087,6 +2104,53 @@ mod tests {
             a += j * d;
         }
         (x, v, a)
+    }
+
+    /// A fit with a negative inertia blames a sensor only where the sensor's reversal would
+    /// show: a negative mean force (the load cell), or a spring that falls as it extends (a
+    /// reversed encoder turns the spring with the rest). With the force positive and the
+    /// spring rising, it names neither: on an independent rig's stick-slip log the fit's
+    /// inertia was -2.66 +- 0.52 with a rising spring, and the message blamed the encoder.
+    #[test]
+    fn an_impossible_inertia_blames_a_sensor_only_where_its_reversal_would_show() {
+        use crate::estimate::sim::{simulate, SimSettings};
+        let law = crate::model::law::ExpLaw {
+            mu_n: 1.1,
+            k2_per_mm: 0.24,
+            f0_n: 2.0,
+        };
+        let settings = SimSettings {
+            duration_s: 60.0,
+            ..SimSettings::default()
+        };
+        let (log, _) = simulate(law, 15.0, 500.0, &settings).unwrap();
+        let fitted = identify(&log, &SensorNoise::default()).unwrap();
+        assert!(fitted.sign_fault.is_none());
+        let judged = |m: f64, k2: f64, log: &CalibrationLog| {
+            let mut id = fitted.clone();
+            id.parameters.0[Param::M.index()] = Estimate {
+                value: Some(m),
+                std: Some(0.01),
+            };
+            id.parameters.0[Param::K2.index()].value = Some(k2);
+            judge_signs(&mut id, log);
+            assert_eq!(id.adequacy.status, FitStatus::DoesNotFit);
+            id.sign_fault.map(|f| f.likely)
+        };
+        assert_eq!(judged(-0.1, 0.24, &log), Some(ReversedSensor::Neither));
+        assert_eq!(judged(-0.1, -0.24, &log), Some(ReversedSensor::Encoder));
+        let mut pulled = log.clone();
+        pulled.force_n.iter_mut().for_each(|f| *f = -*f);
+        assert_eq!(judged(-0.1, 0.24, &pulled), Some(ReversedSensor::LoadCell));
+        let message = SignFault {
+            found: vec!["a negative inertia m".into()],
+            likely: ReversedSensor::Neither,
+        }
+        .to_string();
+        assert!(
+            message.contains("neither sensor") && !message.contains("--position"),
+            "{message}"
+        );
     }
 
     #[test]

@@ -225,7 +225,8 @@ pub enum EstimateError {
         k2_std: f64,
     },
     /// Produced by [`estimate`] when identification, the filter's start, finds parameters of
-    /// signs no transmission has: a sensor read reversed, which the filter cannot follow.
+    /// signs no transmission has: a sensor read reversed, or motion the model does not
+    /// describe. The filter can follow neither.
     #[error("identify: {0}")]
     SignFault(super::identify::SignFault),
     /// Produced by [`estimate`] for [`PositionOffset::Auto`] without a law to fit against.
