@@ -3,6 +3,7 @@ program runs without error, and the interpreted tool path is checked against the
 the finishing pass lies within the tolerance of the ideal tool-centre path (the part boundary
 offset by the cutter radius) in both directions, and no move anywhere gouges the part."""
 import math
+import os
 import re
 import shutil
 import subprocess
@@ -17,8 +18,16 @@ NUM = r"(-?\d+(?:\.\d+)?)"
 
 
 def interpret(ngc, tmp_path):
+    """rs274's canonical output for the program. Each run gets its own home folder: rs274 keeps
+    its tool table in a memory-mapped file there (~/.tool.mmap), and two runs at once (the
+    suite runs on two workers) shared it, so one program's tool changes emptied the other's
+    pockets ("Requested tool 1 not found in the tool table", once in a CI run)."""
     assert RS274, "scripts/test installs linuxcnc-uspace"
-    proc = subprocess.run([RS274, "-g", str(ngc)], capture_output=True, text=True, cwd=tmp_path, timeout=120)
+    home = tmp_path / "rs274-home"
+    home.mkdir(exist_ok=True)
+    env = {**os.environ, "HOME": str(home)}
+    proc = subprocess.run([RS274, "-g", str(ngc)], capture_output=True, text=True, cwd=tmp_path, timeout=120,
+                          env=env)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr
     assert "PROGRAM_END()" in proc.stdout
     return proc.stdout
