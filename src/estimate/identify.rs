@@ -853,7 +853,6 @@ fn scaling(jtj: &M7, active: &Active) -> (Vec<usize>, Vec<f64>) {
     (idx, d)
 }
 
-/// The normal matrix over the active set, scaled to unit diagonal.
 /// The eigen-decomposition of a symmetric matrix, or None for an empty one or one with a
 /// non-finite entry (nalgebra panics on the first and may not converge on the second).
 fn eigen(m: DMatrix<f64>) -> Option<SymmetricEigen<f64, nalgebra::Dyn>> {
@@ -867,6 +866,7 @@ fn eigenvalues(m: DMatrix<f64>) -> Option<DVector<f64>> {
     eigen(m).map(|e| e.eigenvalues)
 }
 
+/// The normal matrix (or a covariance) over the active set, scaled to unit diagonal.
 fn scaled(jtj: &M7, active: &Active) -> DMatrix<f64> {
     let (idx, d) = scaling(jtj, active);
     DMatrix::from_fn(idx.len(), idx.len(), |a, b| {
@@ -1034,6 +1034,18 @@ pub enum CovarianceMethod {
     Model,
 }
 
+/// Whether a covariance is positive definite over the active set, judged on its correlation
+/// matrix: the parameters' variances span many decades (mu's may be 1e-25 N^2 where m's is
+/// 1e2), and the unscaled matrix's smallest eigenvalue is then below the rounding of its
+/// largest, its sign noise. On an independent rig's stick-slip log a rounding change in the
+/// kernels turned the Bartlett covariance (m -2.66 +- 8.7) into the model's (+- 0.52, which
+/// ignores the residuals' correlation).
+fn positive_definite(c: &M7, active: &Active) -> bool {
+    let (idx, _) = scaling(c, active);
+    idx.iter().all(|&k| c[(k, k)] > 0.0)
+        && eigenvalues(scaled(c, active)).is_some_and(|e| e.iter().all(|&l| l > 0.0))
+}
+
 /// Sandwich covariance H^-1 S H^-1, S summed from the residual scores g_i over all pairs of
 /// samples at most `lag` apart (a truncated HAC estimate, computed in O(n) with a sliding sum
 /// of the scores). If that is not positive definite, Bartlett weights over twice the lag
@@ -1069,11 +1081,7 @@ fn sandwich(
         truncated += scores[i] * window.transpose();
     }
     let truncated = (truncated + truncated.transpose()) * 0.5;
-    let positive = |c: &M7| {
-        let (idx, _) = scaling(c, active);
-        let sub = DMatrix::from_fn(idx.len(), idx.len(), |a, b| c[(idx[a], idx[b])]);
-        eigenvalues(sub).is_some_and(|e| e.iter().all(|&l| l > 0.0))
-    };
+    let positive = |c: &M7| positive_definite(c, active);
     let cov = hinv * truncated * hinv;
     if positive(&cov) {
         return Some((cov, CovarianceMethod::Truncated));
@@ -2151,6 +2159,39 @@ mod tests {
             message.contains("neither sensor") && !message.contains("--position"),
             "{message}"
         );
+    }
+
+    /// A covariance whose variances span 26 decades is positive definite when its correlation
+    /// matrix is: the check does not hang on the rounding of the largest variance.
+    #[test]
+    fn a_covariance_is_judged_positive_on_its_correlations_whatever_its_scales() {
+        let active: Active = [true, true, true, false, false, false, false];
+        let sd = [10.0, 1e-12, 0.3];
+        let with = |rho: [f64; 3]| {
+            let mut c = M7::zeros();
+            let r = [
+                [1.0, rho[0], rho[1]],
+                [rho[0], 1.0, rho[2]],
+                [rho[1], rho[2], 1.0],
+            ];
+            for a in 0..3 {
+                for b in 0..3 {
+                    c[(a, b)] = r[a][b] * sd[a] * sd[b];
+                }
+            }
+            c
+        };
+        // Strongly correlated but definite: the smallest eigenvalue of the correlations is
+        // 1 - 0.999 (about 1e-3); of the unscaled matrix about 1e-27, far below the 1e-14
+        // rounding of its largest (100).
+        assert!(positive_definite(&with([0.999, 0.0, 0.0]), &active));
+        // Correlations no covariance has (|rho| > 1, or three that contradict each other).
+        assert!(!positive_definite(&with([1.001, 0.0, 0.0]), &active));
+        assert!(!positive_definite(&with([0.9, 0.9, -0.9]), &active));
+        // A variance that is not positive.
+        let mut c = with([0.0, 0.0, 0.0]);
+        c[(1, 1)] = -1e-30;
+        assert!(!positive_definite(&c, &active));
     }
 
     #[test]
