@@ -466,24 +466,32 @@ def test_windows_where_the_noise_hides_slow_motion_are_still_compared(tmp_path):
         assert abs(final["k2_per_mm"] - tr.k2) < 3.0 * final["k2_per_mm_std"], final
 
 
-def test_a_spring_the_log_does_not_resolve_is_said_so_and_not_judged(tmp_path):
+def test_a_spring_the_log_resolves_poorly_is_judged_with_its_deviation_and_not_shown(tmp_path):
     """A heavy transmission (m 0.46 N s^2/mm) on fast sines at four times the paper's noise,
-    a spring whose exponential part is small against its preload (mu 0.59 N, F0 14.9 N): the
-    inertia's noise buries the spring's curvature, and identification found k2 = -0.008 +- 0.028
-    /mm against 0.163 (z -6.2; 'poorly resolved'). validate failed the true law on that k2 (71 %
-    beyond two of those deviations) while the binned force curve passed. identify now warns that
-    the log does not resolve the spring's curvature, and validate does not judge such a k2: the
-    force curve decides, and the pass is not shown."""
+    a spring whose exponential part is small against its preload (mu 0.59 N, F0 14.9 N); sweep
+    draw 60. Identification found k2 = -0.008 +- 0.028 /mm against 0.163 (z -6.2), and
+    validate failed the true law on it while the binned force curve passed. That was read as
+    the inertia's noise burying the curvature, and such a k2 was left unjudged. The cause was
+    the fit's start: the sines' turning points, bent by the inertia, started k2 near zero and
+    the fit ended at a straight spring, a minimum that is not the lowest. With the profile over
+    k2 (2026-11-27) identification finds k2 0.161 +- 0.015 (z -0.2): resolved, but to 9 %, so
+    it warns that the log is short of the target. validate judges that k2 with its deviation:
+    the true law passes, and the pass is not shown (the upper bound far above 3 %)."""
     tr = Transmission(m=0.459, d0=0.3473, d1=0.30791, d2=-0.00050775, mu=0.593818, k2=0.163483, f0=14.88424)
     rig = Rig(rate_hz=500.0, seed=60, force_variance=0.066309, position_variance=0.039005)
     t, f, x, _ = run(tr, rig, "multisine", 300.0)
     log = tmp_path / "buried.tsv"
     write_rig_log(log, t, f, x, style="tab")
-    ident = camspring("identify", log)
-    assert "does not resolve the spring's curvature" in ident.stdout, ident.stdout
+    ident = camspring("identify", log, "--json")
+    p = json.loads(ident.stdout)["parameters"]
+    k2, sd = p["k2_per_mm"], p["k2_per_mm_std"]
+    assert abs(k2 - tr.k2) < 3 * sd and sd < 0.25 * tr.k2, (k2, sd)
+    text = camspring("identify", log).stdout
+    assert "k2_per_mm is determined only to" in text, text
     rc, right = validate_json(tmp_path, tr, log, 1.0)
-    k2 = next(c for c in right["criteria"] if c["name"] == "k2")
-    assert k2["pass"] and "not resolved" in k2["what"], k2
+    k2c = next(c for c in right["criteria"] if c["name"] == "k2")
+    assert k2c["pass"] and "not resolved" not in k2c["what"], k2c
+    assert k2c["deviation_upper_percent"] > 3.0, k2c
     assert rc == 0 and right["pass"] and not right["conclusive"], right["criteria"]
 
 
