@@ -1577,6 +1577,28 @@ pub(super) fn fit_model(
             .then(|| parallel_columns(&all, &log.position_mm, h, diff, noise, dt))
     };
 
+    // Gauss-Newton over the active parameters from `p`. The filtered exponential is a Taylor
+    // sum about the k2 its moments were summed at: summed again where the fit ended, and the
+    // fit repeated, until k2 stays. Returns the fit and the parameters it dropped.
+    let joint_fit =
+        |p: V7, rows: &mut Rows, active: &mut Active| -> Result<(V7, Vec<String>), IdentifyError> {
+            let (mut p, mut dropped) = gauss_newton(p, rows, active, 100)?;
+            for _ in 0..4 {
+                let (Some(par), Some(k2_ref)) = (&par, rows.filtered.as_ref().map(|f| f.k2_ref))
+                else {
+                    break;
+                };
+                if (p[K2] - k2_ref).abs() <= 1e-9 * p[K2].abs() {
+                    break;
+                }
+                rows.refresh_moments(&all, par, p[K2]);
+                let (next, more) = gauss_newton(p, rows, active, 100)?;
+                p = next;
+                dropped.extend(more);
+            }
+            Ok((p, dropped))
+        };
+
     // Stages 2 and 3 on the samples moving faster than `band`.
     let dynamic_fit = |band: f64, excluded: &[bool], fit_m: bool| -> Result<_, IdentifyError> {
         // Stage 2: the paper's WLS with k2 fixed, on the samples whose friction sign is known.
@@ -1628,22 +1650,8 @@ pub(super) fn fit_model(
         // Stage 3: joint refinement with k2.
         active[K2] = true;
         not_identifiable.extend(prune_all(&mut p, &rows, &mut active, &weights));
-        let (mut p, dropped) = gauss_newton(p, &rows, &mut active, 100)?;
+        let (mut p, dropped) = joint_fit(p, &mut rows, &mut active)?;
         not_identifiable.extend(dropped);
-        // The filtered exponential is a Taylor sum about the k2 its moments were summed at:
-        // summed again where the fit ended, and the fit repeated, until k2 stays.
-        for _ in 0..4 {
-            let (Some(par), Some(k2_ref)) = (&par, rows.filtered.as_ref().map(|f| f.k2_ref)) else {
-                break;
-            };
-            if (p[K2] - k2_ref).abs() <= 1e-9 * p[K2].abs() {
-                break;
-            }
-            rows.refresh_moments(&all, par, p[K2]);
-            let (next, dropped) = gauss_newton(p, &rows, &mut active, 100)?;
-            p = next;
-            not_identifiable.extend(dropped);
-        }
         // Stage 4: the start from the quasi-static samples can mislead. On sines those are
         // the turning points, where a heavy rod's inertia force is largest and bends the
         // curve the other way: the fit then ends where k2 is near zero (mu and F0 large and
@@ -1679,35 +1687,21 @@ pub(super) fn fit_model(
                 }
             }
             if let Some((_, q)) = best.filter(|(c, _)| *c < current - PROFILE_MARGIN) {
-                let mut restart_rows = all.subset(&rows.index, true);
-                if let (Some(par), true) = (&par, rows.filtered.is_some()) {
-                    restart_rows = all.parallel(&rows.index, par, q[K2]);
-                }
+                let mut restart_rows = match (&par, rows.filtered.is_some()) {
+                    (Some(par), true) => all.parallel(&rows.index, par, q[K2]),
+                    _ => direct,
+                };
                 let mut act = active;
-                if let Ok((mut r, dropped)) = gauss_newton(q, &restart_rows, &mut act, 100) {
-                    for _ in 0..4 {
-                        let (Some(par), Some(k2_ref)) =
-                            (&par, restart_rows.filtered.as_ref().map(|f| f.k2_ref))
-                        else {
-                            break;
-                        };
-                        if (r[K2] - k2_ref).abs() <= 1e-9 * r[K2].abs() {
-                            break;
-                        }
-                        restart_rows.refresh_moments(&all, par, r[K2]);
-                        match gauss_newton(r, &restart_rows, &mut act, 100) {
-                            Ok((next, _)) => r = next,
-                            Err(_) => break,
-                        }
-                    }
-                    let score = |q: &V7, rs: &Rows, a: &Active| {
-                        let w = weights_at(q, rs);
-                        objective(q, rs, &w, &correction(rs, a, &w))
-                    };
-                    if act == active && score(&r, &restart_rows, &act) < score(&p, &rows, &active) {
+                // Kept only with the same parameters (nothing dropped) and a lower objective,
+                // each at its own weights.
+                let score = |q: &V7, rs: &Rows| {
+                    let w = weights_at(q, rs);
+                    objective(q, rs, &w, &correction(rs, &active, &w))
+                };
+                if let Ok((r, _)) = joint_fit(q, &mut restart_rows, &mut act) {
+                    if act == active && score(&r, &restart_rows) < score(&p, &rows) {
                         p = r;
                         rows = restart_rows;
-                        not_identifiable.extend(dropped);
                     }
                 }
             }
