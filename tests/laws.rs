@@ -69,12 +69,17 @@ fn quadratic(x: f64) -> f64 {
     20.0 + 10.0 * x + 2.0 * x * x
 }
 
+/// The quadratic law tabulated at 21 points over 15 mm.
+fn quadratic_rows() -> Vec<(f64, f64)> {
+    (0..=20)
+        .map(|i| (0.75 * i as f64, quadratic(0.75 * i as f64)))
+        .collect()
+}
+
 #[test]
 fn a_quadratic_table_is_realised_within_0_1_percent_at_every_point_by_the_forward_model() {
     let d = tempfile::tempdir().unwrap();
-    let rows: Vec<(f64, f64)> = (0..=20)
-        .map(|i| (0.75 * i as f64, quadratic(0.75 * i as f64)))
-        .collect();
+    let rows = quadratic_rows();
     let spec_file = table_spec(d.path(), &rows, FOLLOWER);
     let text = std::fs::read_to_string(d.path().join(&spec_file)).unwrap();
     let spec = camspring::spec::parse_in(&text, d.path()).unwrap();
@@ -123,9 +128,7 @@ fn a_quadratic_table_is_realised_within_0_1_percent_at_every_point_by_the_forwar
 fn checks_advise_a_table_law_and_the_advice_passes() {
     use camspring::cam::checks::Status;
     let d = tempfile::tempdir().unwrap();
-    let rows: Vec<(f64, f64)> = (0..=20)
-        .map(|i| (0.75 * i as f64, quadratic(0.75 * i as f64)))
-        .collect();
+    let rows = quadratic_rows();
     // Soft springs: a steep pressure angle.
     let soft = FOLLOWER.replace("20 N/mm", "4 N/mm");
     let spec_file = table_spec(d.path(), &rows, &soft);
@@ -160,9 +163,7 @@ fn checks_advise_a_table_law_and_the_advice_passes() {
 fn an_undercutting_table_cam_gets_preload_advice_that_works() {
     use camspring::cam::checks::Status;
     let d = tempfile::tempdir().unwrap();
-    let rows: Vec<(f64, f64)> = (0..=20)
-        .map(|i| (0.75 * i as f64, quadratic(0.75 * i as f64)))
-        .collect();
+    let rows = quadratic_rows();
     // No preload and a large roller: the surface folds near x = 0.
     let follower = "count = 1\nspring_rate = \"20 N/mm\"\nroller_radius = \"5 mm\"";
     let spec_file = table_spec(d.path(), &rows, follower);
@@ -190,9 +191,7 @@ fn an_undercutting_table_cam_gets_preload_advice_that_works() {
 #[test]
 fn simulate_then_validate_passes_the_true_table_and_fails_one_scaled_by_5_percent() {
     let d = tempfile::tempdir().unwrap();
-    let rows: Vec<(f64, f64)> = (0..=20)
-        .map(|i| (0.75 * i as f64, quadratic(0.75 * i as f64)))
-        .collect();
+    let rows = quadratic_rows();
     let spec_file = table_spec(d.path(), &rows, FOLLOWER);
     let out = camspring(
         d.path(),
@@ -239,9 +238,7 @@ fn simulate_then_validate_passes_the_true_table_and_fails_one_scaled_by_5_percen
 #[test]
 fn a_table_is_validated_over_its_stroke_from_a_20_hz_log() {
     let d = tempfile::tempdir().unwrap();
-    let rows: Vec<(f64, f64)> = (0..=20)
-        .map(|i| (0.75 * i as f64, quadratic(0.75 * i as f64)))
-        .collect();
+    let rows = quadratic_rows();
     let spec_file = table_spec(d.path(), &rows, FOLLOWER);
     let out = camspring(
         d.path(),
