@@ -675,3 +675,50 @@ def test_a_log_over_less_than_half_the_stroke_passes_only_as_not_conclusive_and_
     assert rc == 1 and not off["pass"], off["criteria"]
     failed = {c["name"] for c in off["criteria"] if not c["pass"]}
     assert "force_rms" in failed and "coverage" not in failed, off["criteria"]
+
+
+
+def redrawn_pulls(tmp_path, row, profile, seed, count):
+    """rig_redraw.py's summary of `count` redraws of one motion's noise, each row with the mean
+    z of its parameter."""
+    from rig_redraw import redraws, summary
+
+    truth, values, stds, _ = redraws(row, profile, seed, count, folder=tmp_path)
+    table = summary(truth, values, stds)
+    for k, (_, name) in enumerate(KEYS):
+        if name in table:
+            z = (values[:, k] - truth[name]) / stds[:, k]
+            table[name]["mean_z"] = float(np.nanmean(z))
+    return table
+
+
+def test_identifications_deviations_hold_over_fresh_noise_on_a_sticking_heavily_damped_rod(tmp_path):
+    """One motion, many noises. The Table II-d2 force-controlled run of seed 1 (a rod that
+    sticks, d2 at the paper's Table II value) gave d2 -0.065 +- 0.0088 against -0.106 in the
+    acceptance matrix, z +4.7. Redrawing only its sensor noise (rig_redraw.py) asks whether
+    that is a dishonest deviation or a rare draw: over the redraws every parameter's errors
+    must be about one reported standard deviation (rms z 0.6-1.5; a covariance that ignored
+    the residuals' correlation over the filter window gives 2 to 5), unbiased (mean z within
+    +-0.8), and none far out (|z| < 4.5). On these 24 redraws: rms z 0.87-1.31, d2 1.04, the
+    largest |z| 4.2 (d0, one redraw; docs/CALIBRATION.md, "An independent rig")."""
+    table = redrawn_pulls(tmp_path, "table-II-d2", "force", 1, 24)
+    assert set(table) == {name for _, name in KEYS}, table
+    for name, r in table.items():
+        assert r["count"] == 24, (name, r)
+        assert 0.6 <= r["rms_z"] <= 1.5, (name, r)
+        assert abs(r["mean_z"]) < 0.8, (name, r)
+        assert r["max_z"] < 4.5, (name, r)
+
+
+@pytest.mark.xfail(strict=True, reason="the spring's deviations on Table I's trapezoids are "
+                   "optimistic: at the 0.61 s window most redraws choose, m, mu, k2 and F0 carry "
+                   "a filter bias of about 1.4 deviations that the comparison with the 0.43 s "
+                   "window counts on few of them (docs/CALIBRATION.md, 'An independent rig')")
+def test_the_springs_deviations_hold_over_fresh_noise_on_table_i_trapezoids(tmp_path):
+    """The paper's Table I transmission (d0 3.8 N) on a motion controller's trapezoidal moves,
+    seed 0's motion, 24 noises: the spring's parameters (mu, k2, F0) must be within about one
+    reported deviation (rms z at most 1.3). Now 1.45-1.57 (1.46 mu, 1.45 k2, 1.57 F0)."""
+    table = redrawn_pulls(tmp_path, "table-I", "trapezoid", 0, 24)
+    for name in ("mu", "k2", "f0"):
+        assert table[name]["count"] == 24, (name, table[name])
+        assert table[name]["rms_z"] <= 1.3, (name, table[name])
