@@ -37,6 +37,15 @@ pub const BALANCING_SIGMAS: f64 = 3.0;
 /// and mu 3 of their standard deviations off, and the balancing principle, trusting it, kept it.
 pub const MIN_SIGNAL_SHARE: f64 = 0.25;
 
+/// The least signal share, as a fraction of the one windows are compared at
+/// ([`MIN_SIGNAL_SHARE`]), of a shorter window whose fit shows that the shortest admissible
+/// one distorts ([`choose_window`], step 4). On the independent rig's Table I trapezoids
+/// (d0 3.8 N, m 0.39) the 0.43 s window's share is 0.23 to 0.26 from one noise to the next:
+/// where it fell below 0.25, the choice went on to 0.61 s, whose reduced chi-square is 10 to
+/// 15 % higher (the moves' corners), and k2 was 1.4 % low, at 1.3 of its deviations, on 17 of
+/// 24 redraws of one motion.
+pub const WITNESS_SHARE_RATIO: f64 = 0.5;
+
 /// The filter's bias at the chosen window, per change of the estimate from the next shorter
 /// window: 1 / (1 - 2^(-p/2)) for a bias growing as the window to the power p, with p = 2.
 /// Counting the change once left m on the heavy acceptance rows' sines up to 4.9 standard
@@ -123,8 +132,11 @@ pub fn candidate_windows(n: usize, dt: f64) -> Vec<usize> {
 /// those, the ones that identify as many parameters as the best, and at which at least a
 /// quarter as many samples move: leaving out a force the log carries, or most of the motion
 /// (transients left out at a long window), biases the rest; samples the velocity's noise band
-/// hides at a short window are left out without bias. Among the
-/// others, in order of length, the chosen window is the longest whose every estimate agrees
+/// hides at a short window are left out without bias. A shorter window whose share is below
+/// the threshold but at least [`WITNESS_SHARE_RATIO`] of it, and that fits the same parameters,
+/// is compared too when the shortest of those windows fits clearly worse than it
+/// (its reduced chi-square higher by at least [`CHI2_RISE_MIN`]): the nearest one then leads.
+/// Among the others, in order of length, the chosen window is the longest whose every estimate agrees
 /// with the estimate of every shorter window within [`BALANCING_SIGMAS`] standard deviations
 /// of their difference, taken as sqrt(s_short^2 - s_long^2) (at least half of s_short): the
 /// longer window's estimate is the more precise, and the difference of two estimates of the
@@ -225,6 +237,26 @@ pub fn choose_window(
         return Err(IdentifyError::NoConvergence(
             "no window was admissible".into(),
         ));
+    }
+    // 4. A window whose signal share is just short of the threshold still shows, by its
+    //    reduced chi-square, whether the shortest admissible window distorts. Where that one
+    //    fits the same parameters clearly worse, the nearest such shorter window is put
+    //    first, and the balancing starts from it.
+    let mut admissible = admissible;
+    let first = admissible[0];
+    if let Ok(long) = &fits[first] {
+        let witness = (0..first).rev().find(|&i| {
+            fits[i].as_ref().is_ok_and(|short| {
+                explains(short)
+                    && short.signal_share >= WITNESS_SHARE_RATIO * min_share
+                    && same_parameters(short, long)
+                    && 4 * short.dynamic_samples >= most_moving
+                    && distorted(short, long)
+            })
+        });
+        if let Some(i) = witness {
+            admissible.insert(0, i);
+        }
     }
     let mut chosen = admissible[0];
     'longer: for (j, &long) in admissible.iter().enumerate().skip(1) {
@@ -406,6 +438,15 @@ fn distorted(short: &Identification, long: &Identification) -> bool {
     let rise = (CHI2_RISE_SIGMAS * (2.0 / dof).sqrt()).max(CHI2_RISE_MIN);
     let noise = 2.0 * (long.reduced_chi2_noise_change - short.reduced_chi2_noise_change).abs();
     long.reduced_chi2_with_transients > short.reduced_chi2_with_transients * (1.0 + rise) + noise
+}
+
+/// Whether two fits identify the same parameters.
+fn same_parameters(a: &Identification, b: &Identification) -> bool {
+    let mut x = a.not_identifiable.clone();
+    let mut y = b.not_identifiable.clone();
+    x.sort();
+    y.sort();
+    x == y
 }
 
 /// Whether every parameter that both fits identify agrees within [`BALANCING_SIGMAS`]

@@ -710,15 +710,18 @@ def test_identifications_deviations_hold_over_fresh_noise_on_a_sticking_heavily_
         assert r["max_z"] < 4.5, (name, r)
 
 
-@pytest.mark.xfail(strict=True, reason="the spring's deviations on Table I's trapezoids are "
-                   "optimistic: at the 0.61 s window most redraws choose, m, mu, k2 and F0 carry "
-                   "a filter bias of about 1.4 deviations that the comparison with the 0.43 s "
-                   "window counts on few of them (docs/CALIBRATION.md, 'An independent rig')")
 def test_the_springs_deviations_hold_over_fresh_noise_on_table_i_trapezoids(tmp_path):
     """The paper's Table I transmission (d0 3.8 N) on a motion controller's trapezoidal moves,
     seed 0's motion, 24 noises: the spring's parameters (mu, k2, F0) must be within about one
-    reported deviation (rms z at most 1.3). Now 1.45-1.57 (1.46 mu, 1.45 k2, 1.57 F0)."""
+    reported deviation (rms z at most 1.3), and every other parameter within 1.5.
+
+    The 0.43 s window's signal share is 0.23 to 0.26 from one noise to the next. Where it fell
+    below the 0.25 windows are compared at, the choice went on to 0.61 s, whose reduced
+    chi-square is 10 to 15 % higher (the moves' corners) and whose k2 is 1.4 % low: mu, k2 and
+    F0 at rms z 1.46, 1.45 and 1.57 on these redraws. The shorter window now witnesses the
+    distortion (window.rs, `WITNESS_SHARE_RATIO`): 0.83 to 0.92."""
     table = redrawn_pulls(tmp_path, "table-I", "trapezoid", 0, 24)
-    for name in ("mu", "k2", "f0"):
-        assert table[name]["count"] == 24, (name, table[name])
-        assert table[name]["rms_z"] <= 1.3, (name, table[name])
+    assert set(table) == {name for _, name in KEYS}, table
+    for name, r in table.items():
+        assert r["count"] == 24, (name, r)
+        assert r["rms_z"] <= (1.3 if name in ("mu", "k2", "f0") else 1.5), (name, r)
