@@ -57,7 +57,7 @@ def redraws(row, profile, seed, count, args=(), seconds=300, folder=None):
 
 def summary(truth, values, stds):
     """Per parameter (KEYS' short names): spread, mean reported std, its coefficient of
-    variation, bias, rms z and max |z| over the redraws that identified it."""
+    variation, bias, mean z, rms z and max |z| over the redraws that identified it."""
     rows = {}
     for k, (_, name) in enumerate(KEYS):
         ok = np.isfinite(values[:, k])
@@ -67,7 +67,8 @@ def summary(truth, values, stds):
         z = (v - truth[name]) / s
         rows[name] = dict(count=int(ok.sum()), spread=float(np.std(v)), reported=float(np.mean(s)),
                           cv=float(np.std(s) / np.mean(s)), bias=float(np.mean(v) - truth[name]),
-                          rms_z=float(np.sqrt(np.mean(z * z))), max_z=float(np.max(np.abs(z))))
+                          mean_z=float(np.mean(z)), rms_z=float(np.sqrt(np.mean(z * z))),
+                          max_z=float(np.max(np.abs(z))))
     return rows
 
 

@@ -679,17 +679,11 @@ def test_a_log_over_less_than_half_the_stroke_passes_only_as_not_conclusive_and_
 
 
 def redrawn_pulls(tmp_path, row, profile, seed, count):
-    """rig_redraw.py's summary of `count` redraws of one motion's noise, each row with the mean
-    z of its parameter."""
+    """rig_redraw.py's summary of `count` redraws of one motion's noise."""
     from rig_redraw import redraws, summary
 
     truth, values, stds, _ = redraws(row, profile, seed, count, folder=tmp_path)
-    table = summary(truth, values, stds)
-    for k, (_, name) in enumerate(KEYS):
-        if name in table:
-            z = (values[:, k] - truth[name]) / stds[:, k]
-            table[name]["mean_z"] = float(np.nanmean(z))
-    return table
+    return summary(truth, values, stds)
 
 
 def test_identifications_deviations_hold_over_fresh_noise_on_a_sticking_heavily_damped_rod(tmp_path):
