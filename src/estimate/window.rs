@@ -133,14 +133,14 @@ pub fn candidate_windows(n: usize, dt: f64) -> Vec<usize> {
 /// quarter as many samples move: leaving out a force the log carries, or most of the motion
 /// (transients left out at a long window), biases the rest; samples the velocity's noise band
 /// hides at a short window are left out without bias. A shorter window whose share is below
-/// the threshold but at least [`WITNESS_SHARE_RATIO`] of it, and that fits the same parameters,
-/// is compared too when the shortest of those windows fits clearly worse than it
+/// the threshold but at least [`WITNESS_SHARE_RATIO`] of it, and that fits the same
+/// parameters, is compared too when the shortest of those windows fits clearly worse than it
 /// (its reduced chi-square higher by at least [`CHI2_RISE_MIN`]): the nearest one then leads.
-/// Among the others, in order of length, the chosen window is the longest whose every estimate agrees
-/// with the estimate of every shorter window within [`BALANCING_SIGMAS`] standard deviations
-/// of their difference, taken as sqrt(s_short^2 - s_long^2) (at least half of s_short): the
-/// longer window's estimate is the more precise, and the difference of two estimates of the
-/// same quantity has about that spread.
+/// Among the others, in order of length, the chosen window is the longest whose every
+/// estimate agrees with the estimate of every shorter window within [`BALANCING_SIGMAS`]
+/// standard deviations of their difference, taken as sqrt(s_short^2 - s_long^2) (at least
+/// half of s_short): the longer window's estimate is the more precise, and the difference of
+/// two estimates of the same quantity has about that spread.
 pub fn choose_window(
     log: &CalibrationLog,
     noise: &SensorNoise,

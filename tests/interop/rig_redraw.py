@@ -33,11 +33,11 @@ def redraws(row, profile, seed, count, args=(), seconds=300, folder=None):
     rig = Rig(seed=seed)
     n = int(round(seconds * rig.rate_hz))
     t = np.arange(n) / rig.rate_hz
-    # The speed the matrix's run of this seed chose, then the same motion again.
-    speed = run(tr, rig, profile, seconds)[3]["speed"]
-    x, _, _, f = motion(tr, rig, profile, t, 15.0, speed, np.random.default_rng(seed))
+    # The speed (and truth) of the matrix's run of this seed, then the same motion again.
+    matrix_truth = run(tr, rig, profile, seconds)[3]
+    truth = {name: matrix_truth[name] for _, name in KEYS}
+    x, _, _, f = motion(tr, rig, profile, t, 15.0, matrix_truth["speed"], np.random.default_rng(seed))
     noise = np.random.default_rng(10_000 + seed)
-    truth = dict(m=tr.m, d0=tr.d0, d1=tr.d1, d2=tr.d2, mu=tr.mu, k2=tr.k2, f0=tr.f0)
     values, stds, windows = [], [], []
     with tempfile.TemporaryDirectory(dir=folder) as tmp:
         log = pathlib.Path(tmp) / "redraw.tsv"

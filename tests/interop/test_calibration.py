@@ -677,7 +677,6 @@ def test_a_log_over_less_than_half_the_stroke_passes_only_as_not_conclusive_and_
     assert "force_rms" in failed and "coverage" not in failed, off["criteria"]
 
 
-
 def redrawn_pulls(tmp_path, row, profile, seed, count):
     """rig_redraw.py's summary of `count` redraws of one motion's noise."""
     from rig_redraw import redraws, summary
