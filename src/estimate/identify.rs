@@ -513,8 +513,51 @@ struct Filtered {
     k2_ref: f64,
     /// Noise variance of the filtered velocity column.
     var_xd: f64,
-    /// Noise variance of the velocity before the filter (one central difference).
-    var_difference: f64,
+    /// The filtered cube's noise of second and third order ([`CubeNoise`]).
+    cube_noise: CubeNoise,
+}
+
+/// The noise of the filtered unbiased cube C = sum_j q_j c_j, c_j = o_j^3 - 3 o_j s2, beyond
+/// its part linear in the noise (which is 3 v^2 times the filtered velocity's). Each c_j is
+/// v^3 + 3 v^2 H1 + 3 v H2 + H3 in the Hermite polynomials of the difference's noise d_j
+/// (variance s2), and for jointly Gaussian d_j, d_k of covariance c_jk,
+/// E[Ha(d_j) Hb(d_k)] = [a = b] a! c_jk^a. So var(C) = 9 v^4 var_o + 18 v^2 `second` + 6
+/// `third`, with `second` = sum_jk q_j q_k c_jk^2 and `third` = sum_jk q_j q_k c_jk^3.
+/// Neighbouring taps of the parallel filter's central differences share a sample, with
+/// correlation -1/2, so neither is var_o times s2 or s2^2: through a smooth filter var_o
+/// nearly cancels while these do not (2026-11-28: on a 1 kHz trapezoid log that scaling left
+/// d2 shrunk to 1 % of the truth, at z +39).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct CubeNoise {
+    second: f64,
+    third: f64,
+}
+
+impl CubeNoise {
+    /// The cube's higher-order noise through `taps` (consecutive samples, centred), whose
+    /// inputs are central differences of noise variance `s2`: correlation -1/2 two samples
+    /// apart, none otherwise.
+    fn through_differences(taps: &[f64], s2: f64) -> CubeNoise {
+        let (mut second, mut third) = (0.0, 0.0);
+        for (j, &a) in taps.iter().enumerate() {
+            second += a * a;
+            third += a * a;
+            if let Some(&b) = taps.get(j + 2) {
+                // Both orders of the pair: 2 a b rho^2 and 2 a b rho^3, rho = -1/2.
+                second += 0.5 * a * b;
+                third -= 0.25 * a * b;
+            }
+        }
+        CubeNoise {
+            second: second * s2 * s2,
+            third: third * s2 * s2 * s2,
+        }
+    }
+
+    /// The variance of the cube's noise beyond its linear part, at velocity squared `v2`.
+    fn variance(&self, v2: f64) -> f64 {
+        18.0 * v2 * self.second + 6.0 * self.third
+    }
 }
 
 impl Rows {
@@ -567,7 +610,7 @@ impl Rows {
                 moments,
                 k2_ref: k2,
                 var_xd: par.var_xd,
-                var_difference: par.var_difference,
+                cube_noise: par.cube_noise,
             }),
         }
     }
@@ -598,8 +641,8 @@ struct Parallel {
     var_f: f64,
     /// Noise variance of the filtered velocity.
     var_xd: f64,
-    /// Noise variance of one central difference, before the filter.
-    var_difference: f64,
+    /// The filtered cube's noise of second and third order.
+    cube_noise: CubeNoise,
 }
 
 /// The filter `kernel` (consecutive samples, centred) applied to `y`: NaN within its half
@@ -694,7 +737,19 @@ fn row_variance(p: &V7, r: &Rows, i: usize) -> f64 {
     let stiffness = p[K2] * p[MU] * (p[K2] * r.x[i]).exp();
     let damping = p[D1] + 3.0 * p[D2] * r.xd[i] * r.xd[i];
     let var_xd = r.filtered.as_ref().map_or(r.var_xd, |q| q.var_xd);
-    r.var_f + stiffness * stiffness * r.var_x + damping * damping * var_xd + p[M] * p[M] * r.var_xdd
+    let linear = r.var_f
+        + stiffness * stiffness * r.var_x
+        + damping * damping * var_xd
+        + p[M] * p[M] * r.var_xdd;
+    // Through the parallel filter the cube's noise of higher order does not cancel with the
+    // filter, as its linear part does ([`CubeNoise`]).
+    match &r.filtered {
+        Some(q) => {
+            let v2 = (q.xd[i] * q.xd[i] - q.var_xd).max(0.0);
+            linear + p[D2] * p[D2] * q.cube_noise.variance(v2)
+        }
+        None => linear,
+    }
 }
 
 fn weights_at(p: &V7, r: &Rows) -> Vec<f64> {
@@ -728,17 +783,17 @@ fn row_correction(r: &Rows, i: usize, active: &Active) -> M7 {
     if active[M] {
         c[(M, M)] = r.var_xdd;
     }
-    // The velocity column o, its noise variance, and the noise variance of the velocity the
-    // cube was taken of, per sample. Through the parallel filter the column is Q applied to
-    // central differences: to first order in the noise (the velocity nearly constant over the
-    // filter) each entry is the filtered variance's; the cube's higher-order terms scale from
-    // the difference's own variance alike.
-    let (o, var_o, s2) = match &r.filtered {
-        Some(q) => (q.xd[i], q.var_xd, q.var_difference),
-        None => (r.xd[i], r.var_xd, r.var_xd),
+    // The velocity column o and its noise variance. Directly, o is the velocity kernel's
+    // output and the cube is taken of it, so the single-sample moments above hold. Through
+    // the parallel filter o is Q applied to central differences (to first order in the
+    // noise, the velocity nearly constant over the filter, the linear terms are the filtered
+    // variance's), and the cube's higher-order terms are summed over Q's correlated taps
+    // ([`CubeNoise`]).
+    let (o, var_o) = match &r.filtered {
+        Some(q) => (q.xd[i], q.var_xd),
+        None => (r.xd[i], r.var_xd),
     };
-    if var_o > 0.0 && s2 > 0.0 {
-        let scale = var_o / s2;
+    if var_o > 0.0 {
         let o2 = o * o;
         let v2 = o2 - var_o;
         let v4 = o2 * o2 - 6.0 * o2 * var_o + 3.0 * var_o * var_o;
@@ -750,9 +805,15 @@ fn row_correction(r: &Rows, i: usize, active: &Active) -> M7 {
             c[(D2, D1)] = c[(D1, D2)];
         }
         if active[D2] {
-            // (In this order the direct rows' sum is the one it always was, to the last bit.)
-            c[(D2, D2)] =
-                9.0 * v4 * var_o + 18.0 * v2 * s2 * s2 * scale + 6.0 * s2 * s2 * s2 * scale;
+            c[(D2, D2)] = match &r.filtered {
+                Some(q) => 9.0 * v4 * var_o + q.cube_noise.variance(v2),
+                // (In this order the direct rows' sum is the one it always was, to the last
+                // bit.)
+                None => {
+                    let s2 = var_o;
+                    9.0 * v4 * var_o + 18.0 * v2 * s2 * s2 + 6.0 * s2 * s2 * s2
+                }
+            };
         }
     }
     c
@@ -1454,11 +1515,50 @@ pub(super) enum Inertia {
 }
 
 /// The identification at one Savitzky-Golay window, with or without the inertia.
+///
+/// Through the parallel filter where the log allows it ([`Regression::ParallelFilter`]), unless
+/// the direct regression resolves more: its velocity columns come from central differences,
+/// whose cube is far noisier than the velocity kernel's, so where the log's damper is cubic the
+/// parallel fit can lose d2's information to noise. Where the parallel filter qualifies, the
+/// direct regression is fitted too, and taken where it gives up fewer parameters, or as few
+/// and its information is mostly signal ([`super::window::MIN_SIGNAL_SHARE`]) where the
+/// parallel fit's is not. (2026-11-28: on a 1 kHz trapezoid log of a cubic damper, with the
+/// cube's noise counted right ([`CubeNoise`]), the parallel fit's share was 0.21 at 0.61 s and
+/// it kept neither m nor d2 at any window; the direct one identified all seven there, each
+/// within 1.1 standard deviations.)
 pub(super) fn fit_model(
     log: &CalibrationLog,
     noise: &SensorNoise,
     diff: &Differentiator,
     inertia: Inertia,
+) -> Result<Identification, IdentifyError> {
+    let fit = fit_regression(log, noise, diff, inertia, true)?;
+    if fit.regression != Regression::ParallelFilter {
+        return Ok(fit);
+    }
+    let Ok(direct) = fit_regression(log, noise, diff, inertia, false) else {
+        return Ok(fit);
+    };
+    let resolves = |id: &Identification| {
+        (
+            std::cmp::Reverse(id.not_identifiable.len()),
+            id.signal_share >= super::window::MIN_SIGNAL_SHARE,
+        )
+    };
+    Ok(if resolves(&direct) > resolves(&fit) {
+        direct
+    } else {
+        fit
+    })
+}
+
+/// [`fit_model`] with the parallel filter `allowed` or not.
+fn fit_regression(
+    log: &CalibrationLog,
+    noise: &SensorNoise,
+    diff: &Differentiator,
+    inertia: Inertia,
+    parallel_allowed: bool,
 ) -> Result<Identification, IdentifyError> {
     let dt = log.dt_s();
     let h = diff.half;
@@ -1573,7 +1673,7 @@ pub(super) fn fit_model(
         let moving: Vec<usize> = (0..n).filter(|&i| motion[i].abs() > band).collect();
         let none = vec![false; n];
         let share = spanning(&moving, band, &none).len() as f64;
-        (share >= PARALLEL_MIN_SHARE * moving.len() as f64)
+        (parallel_allowed && share >= PARALLEL_MIN_SHARE * moving.len() as f64)
             .then(|| parallel_columns(&all, &log.position_mm, h, diff, noise, dt))
     };
 
@@ -1991,7 +2091,7 @@ fn parallel_columns(
         var_x: diff.smoothed_noise_variance(sg::POSITION, &q_full, var, dt),
         var_f: noise.force_variance_n2 * qt.iter().map(|w| w * w).sum::<f64>(),
         var_xd: var * through_q.iter().map(|w| w * w).sum::<f64>(),
-        var_difference,
+        cube_noise: CubeNoise::through_differences(&q_full, var_difference),
         curvature: dt * dt / 3.0,
         q,
     }
@@ -2187,6 +2287,62 @@ mod tests {
             a += j * d;
         }
         (x, v, a)
+    }
+
+    /// The filtered cube's noise ([`CubeNoise`]) against a simulation: white position noise,
+    /// central differences at every sample, the parallel filter's smoother over them, and the
+    /// sample variance of the filtered unbiased cube at a constant velocity. Neighbouring taps
+    /// share a sample; scaling the single-sample moments by the filtered velocity's variance,
+    /// as identification did until 2026-11-28, put it 70 times too low on these taps.
+    #[test]
+    fn the_filtered_cubes_noise_is_summed_over_correlated_differences() {
+        use rand::{rngs::StdRng, SeedableRng};
+        use rand_distr::{Distribution, Normal};
+        let dt = 0.01;
+        let sigma = 0.02;
+        let s2 = sigma * sigma / (2.0 * dt * dt);
+        let q = acceleration_smoother(&Differentiator::new(43));
+        let (q_full, _) = force_filter(&q);
+        let noise = CubeNoise::through_differences(&q_full, s2);
+        let mut rng = StdRng::seed_from_u64(11);
+        let normal = Normal::new(0.0, sigma).unwrap();
+        let n = q_full.len() + 2;
+        for v in [0.0, 1.5, 4.0] {
+            let (mut sum_o, mut sum_o2, mut sum_c, mut sum_c2) = (0.0, 0.0, 0.0, 0.0);
+            let trials = 40_000;
+            let mut e = vec![0.0; n];
+            for _ in 0..trials {
+                e.iter_mut().for_each(|x| *x = normal.sample(&mut rng));
+                let (mut o, mut c) = (0.0, 0.0);
+                for (j, w) in q_full.iter().enumerate() {
+                    let d = v + (e[j + 2] - e[j]) / (2.0 * dt);
+                    o += w * d;
+                    c += w * unbiased_cube(d, s2);
+                }
+                sum_o += o;
+                sum_o2 += o * o;
+                sum_c += c;
+                sum_c2 += c * c;
+            }
+            let t = trials as f64;
+            let var_o = sum_o2 / t - (sum_o / t).powi(2);
+            let var_c = sum_c2 / t - (sum_c / t).powi(2);
+            let predicted = 9.0 * v.powi(4) * var_o + noise.variance(v * v);
+            // The sample variance of 40 000 draws is known to about sqrt(2 / 40 000) = 0.7 %
+            // for a Gaussian; the cube's tails are heavier, so 5 % is about four of its
+            // standard deviations.
+            assert!(
+                (var_c / predicted - 1.0).abs() < 0.05,
+                "v {v}: simulated {var_c}, predicted {predicted}"
+            );
+            assert!(
+                (sum_c / t - v * v * v).abs() < 4.0 * (var_c / t).sqrt(),
+                "v {v}"
+            );
+            // The old scaling, for the record of what it missed.
+            let scaled = 9.0 * v.powi(4) * var_o + (18.0 * v * v * s2 + 6.0 * s2 * s2) * var_o;
+            assert!(scaled < 0.2 * var_c, "v {v}: {scaled} against {var_c}");
+        }
     }
 
     /// A fit with a negative inertia blames a sensor only where the sensor's reversal would
