@@ -1552,7 +1552,8 @@ pub(super) fn fit_model(
     })
 }
 
-/// [`fit_model`] with the parallel filter `allowed` or not.
+/// [`fit_model`] through the parallel filter where the log allows it and `parallel_allowed`,
+/// else directly.
 fn fit_regression(
     log: &CalibrationLog,
     noise: &SensorNoise,
