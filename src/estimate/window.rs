@@ -216,7 +216,7 @@ pub fn choose_window(
     if let Some(i) = lone_inertia(&fits, &explains) {
         let diff = Differentiator::new(windows[i]);
         let refit = fit_inertia_with_noise_uncertainty(log, noise, &diff, Inertia::LeftOut);
-        if refit.as_ref().is_ok_and(|id| explains(id)) {
+        if refit.as_ref().is_ok_and(&explains) {
             fits[i] = refit;
         }
     }
