@@ -516,6 +516,18 @@ def sweep_log(tmp_path, i):
     return tr, log
 
 
+def fitting_sweep_draw(tmp_path, i):
+    """Sweep draw `i` identified: exit 0, a fit that explains the log, and every estimate
+    within three of its standard deviations of the truth. Returns identify's JSON."""
+    tr, log = sweep_log(tmp_path, i)
+    ident = camspring("identify", log, "--json")
+    assert ident.returncode == 0, ident.stderr
+    j = json.loads(ident.stdout)
+    assert j["fit"]["status"] == "fits", j["fit"]
+    assert_every_estimate_within_three_sigma(j, {name: getattr(tr, name) for _, name in KEYS})
+    return j
+
+
 @pytest.mark.parametrize("i", [156, 159])
 def test_a_cubic_damper_read_by_a_fine_encoder_at_1_khz_is_not_lost_in_the_parallel_filter(tmp_path, i):
     """Sweep draws 156 (trapezoids, m 0.20, d1 0.15, d2 -0.0151) and 159 (a servo's ramps,
@@ -525,14 +537,8 @@ def test_a_cubic_damper_read_by_a_fine_encoder_at_1_khz_is_not_lost_in_the_paral
     as fits at exit 0. With that noise counted the parallel fit cannot resolve d2 there, and
     the direct regression, which does, is taken: every estimate within three standard
     deviations, d2 among them."""
-    tr, log = sweep_log(tmp_path, i)
-    ident = camspring("identify", log, "--json")
-    assert ident.returncode == 0, ident.stderr
-    j = json.loads(ident.stdout)
-    assert j["fit"]["status"] == "fits", j["fit"]
-    truth = {name: getattr(tr, name) for _, name in KEYS}
+    j = fitting_sweep_draw(tmp_path, i)
     assert j["parameters"]["d2_n_s3_per_mm3"] is not None, j["not_identifiable"]
-    assert_every_estimate_within_three_sigma(j, truth)
 
 
 @pytest.mark.parametrize("i", [134, 184])
@@ -543,13 +549,7 @@ def test_an_inertia_only_one_window_keeps_is_given_up_on_a_servos_ramps(tmp_path
     missed them and read their force as inertia: m 16 and 27 % high, at z +3.3 and +4.7,
     reported as fits. m is now given up where one window alone keeps it, and every estimate
     left is within three standard deviations."""
-    tr, log = sweep_log(tmp_path, i)
-    ident = camspring("identify", log, "--json")
-    assert ident.returncode == 0, ident.stderr
-    j = json.loads(ident.stdout)
-    assert j["fit"]["status"] == "fits", j["fit"]
-    truth = {name: getattr(tr, name) for _, name in KEYS}
-    assert_every_estimate_within_three_sigma(j, truth)
+    j = fitting_sweep_draw(tmp_path, i)
     assert j["parameters"]["k2_per_mm"] is not None
 
 
