@@ -180,31 +180,29 @@ pub fn choose_window(
         .map(|id| id.signal_share)
         .fold(0.0_f64, f64::max);
     let min_share = MIN_SIGNAL_SHARE.min(0.5 * best_share);
+    // The fit at window i without m, taken where it explains the log.
+    let without_m = |i: usize| {
+        let diff = Differentiator::new(windows[i]);
+        fit_inertia_with_noise_uncertainty(log, noise, &diff, Inertia::LeftOut)
+    };
+    let mut fits = fits;
+    let give_up_m = |fits: &mut [Result<Identification, IdentifyError>], i, refit| {
+        if matches!(&refit, Ok(id) if explains(id)) {
+            fits[i] = refit;
+        }
+    };
     // Where m's information is mostly noise, the window is fitted again without it: the other
     // parameters are then compared at that window, and m is given up there instead.
     let refits: Vec<(usize, Result<Identification, IdentifyError>)> = (0..fits.len())
         .into_par_iter()
         .filter_map(|i| {
             let id = fits[i].as_ref().ok()?;
-            (explains(id) && id.signal_share < min_share && id.get(Param::M).value.is_some()).then(
-                || {
-                    let diff = Differentiator::new(windows[i]);
-                    (
-                        i,
-                        fit_inertia_with_noise_uncertainty(log, noise, &diff, Inertia::LeftOut),
-                    )
-                },
-            )
+            (explains(id) && id.signal_share < min_share && id.get(Param::M).value.is_some())
+                .then(|| (i, without_m(i)))
         })
         .collect();
-    let mut fits = fits;
     for (i, refit) in refits {
-        if refit
-            .as_ref()
-            .is_ok_and(|id| id.adequacy.status == FitStatus::Fits || !fits_somewhere)
-        {
-            fits[i] = refit;
-        }
+        give_up_m(&mut fits, i, refit);
     }
     // Where one window alone keeps m among those that explain the log, and a shorter and a
     // longer one both give it up, m is given up there too: the windows about it lost m's
@@ -214,11 +212,7 @@ pub fn choose_window(
     // high, 16 and 27 % on two; and on a force-controlled rod that slips through the stroke
     // in short jumps, draw 253.)
     if let Some(i) = lone_inertia(&fits, &explains) {
-        let diff = Differentiator::new(windows[i]);
-        let refit = fit_inertia_with_noise_uncertainty(log, noise, &diff, Inertia::LeftOut);
-        if refit.as_ref().is_ok_and(&explains) {
-            fits[i] = refit;
-        }
+        give_up_m(&mut fits, i, without_m(i));
     }
     let ok = || fits.iter().filter_map(|f| f.as_ref().ok());
     let resolved = |id: &Identification| explains(id) && id.signal_share >= min_share;
