@@ -950,8 +950,17 @@ pub fn run_validate(
                     Some(e.k2_deviation_upper_percent(judged_k2, judged_k2_std));
                 c.pass =
                     c.deviation_percent.is_finite() && c.deviation_percent <= c.tolerance_percent;
-                c.what = if !crate::estimate::identify::k2_resolved(judged_k2, judged_k2_std) {
-                    "exponent rate k2: not resolved by this log (its standard deviation exceeds half its value, or it is not positive), so not judged"
+                // Identification's k2 is judged only where it resolves the spring, its mu
+                // too ([`crate::estimate::identify::spring_resolved`]).
+                let unresolved = !crate::estimate::identify::k2_resolved(judged_k2, judged_k2_std)
+                    || (!consistent && !crate::estimate::identify::spring_resolved(id));
+                if unresolved {
+                    c.deviation_percent = 0.0;
+                    c.deviation_upper_percent = Some(f64::INFINITY);
+                    c.pass = true;
+                }
+                c.what = if unresolved {
+                    "exponent rate k2: not resolved by this log (its standard deviation exceeds half its value, or it is not positive, or identification's mu cannot be told from zero), so not judged"
                 } else if consistent {
                     "EKF exponent rate k2 beyond the exponents of the designed build's loading and unloading curves and two of its standard deviations"
                 } else {

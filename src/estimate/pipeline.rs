@@ -207,22 +207,27 @@ pub enum EstimateError {
     #[error("estimate: {0}")]
     Filter(#[from] EkfError),
     /// Produced by [`estimate`] when identification, the filter's start, does not resolve the
-    /// spring's curvature ([`super::identify::k2_resolved`]): a filter started from a k2 whose
-    /// standard deviation exceeds half its value has no spring to converge to. On an
-    /// independent rig's force-controlled log whose rod stuck most of the time (763 of 30 000
-    /// samples moving, k2 = 2.19 +- 8.1 /mm against 0.114) it diverged at 24 s, and three
-    /// recoveries diverged too.
+    /// spring's curvature ([`super::identify::spring_resolved`]): a filter started from a k2
+    /// whose standard deviation exceeds half its value, or from an exponential part mu that
+    /// the log cannot tell from zero, has no spring to converge to. On an independent rig's
+    /// force-controlled log whose rod stuck most of the time (763 of 30 000 samples moving,
+    /// k2 = 2.19 +- 8.1 /mm against 0.114) it diverged at 24 s, and three recoveries diverged
+    /// too.
     #[error(
         "estimate: identification does not resolve the spring's curvature on this log (k2 = \
-         {k2_per_mm:.5} +- {k2_std:.5} 1/mm), so the filter has nothing to start from and is not \
-         run; record a run over more of the stroke, slower, or with less sensor noise (identify \
-         says what the log lacks)"
+         {k2_per_mm:.5} +- {k2_std:.5} 1/mm, mu = {mu_n:.5} +- {mu_std:.5} N), so the filter has \
+         nothing to start from and is not run; record a run over more of the stroke, slower, or \
+         with less sensor noise (identify says what the log lacks)"
     )]
     SpringNotResolved {
         /// Identification's k2 (1/mm).
         k2_per_mm: f64,
         /// Its standard deviation (1/mm).
         k2_std: f64,
+        /// Identification's mu (N).
+        mu_n: f64,
+        /// Its standard deviation (N).
+        mu_std: f64,
     },
     /// Produced by [`estimate`] when identification, the filter's start, finds parameters of
     /// signs no transmission has: a sensor read reversed, or motion the model does not
@@ -985,11 +990,16 @@ where
             if let Some(fault) = &id.sign_fault {
                 return Err(EstimateError::SignFault(fault.clone()));
             }
-            let k2 = id.get(super::identify::Param::K2);
-            if let (Some(k2_per_mm), Some(k2_std)) = (k2.value, k2.std) {
-                if !super::identify::k2_resolved(k2_per_mm, k2_std) {
-                    return Err(EstimateError::SpringNotResolved { k2_per_mm, k2_std });
-                }
+            if !super::identify::spring_resolved(&id) {
+                let value = |p| id.get(p).value.unwrap_or(f64::NAN);
+                let std = |p| id.get(p).std.unwrap_or(f64::NAN);
+                use super::identify::Param::{Mu, K2};
+                return Err(EstimateError::SpringNotResolved {
+                    k2_per_mm: value(K2),
+                    k2_std: std(K2),
+                    mu_n: value(Mu),
+                    mu_std: std(Mu),
+                });
             }
             let stroke = (lo - offset_mm).abs().max((hi - offset_mm).abs());
             (
