@@ -252,7 +252,8 @@ pub struct DiagnosisBin {
     /// Standard error of `measured_n` (N), from the scatter of the means of the bin's separate
     /// passes (runs of consecutive samples in it): within a pass the errors of the dynamic
     /// terms taken out are correlated over the smoothing window, between passes they are not.
-    /// With fewer than three passes, the samples' own scatter about the curve's local slope.
+    /// With fewer than three passes, counted by weight ([`MIN_WEIGHTED_PASSES`]), the
+    /// samples' own scatter about the curve's local slope.
     /// Added to it, the fitted inertia's and damper's error, which every pass shares.
     pub measured_std_n: f64,
     /// The design's forward model there, built as designed and logged with a true zero (N).
@@ -359,6 +360,11 @@ pub const MAX_ZERO_CORRELATION: f64 = 0.95;
 
 /// Bins of the curves over the logged deflections.
 const BINS: usize = 30;
+
+/// Fewest passes through a bin, counted by their weight (n^2 over the sum of the squared pass
+/// lengths), whose means' scatter gives the bin's standard error; with fewer, the samples' own
+/// scatter about the curve's slope is taken, not divided down ([`DiagnosisBin::measured_std_n`]).
+pub const MIN_WEIGHTED_PASSES: f64 = 3.0;
 
 /// The fit's prepared samples.
 struct Samples {
@@ -1546,18 +1552,7 @@ fn bin_curves(
             let mean = sf / count as f64;
             let list = &passes[k][side];
             let n = count as f64;
-            let scatter_std_n = if list.len() >= 3 {
-                let v = list.len() as f64;
-                let spread: f64 = list
-                    .iter()
-                    .map(|&(sum, _, c)| (c as f64 / n).powi(2) * (sum / c as f64 - mean).powi(2))
-                    .sum();
-                (spread * v / (v - 1.0)).sqrt()
-            } else {
-                // The samples' own scatter, not divided down: they are correlated.
-                let squares: f64 = list.iter().map(|p| p.1).sum();
-                ((squares - n * mean * mean).max(0.0) / (n - 1.0)).sqrt()
-            };
+            let scatter_std_n = pass_scatter_std(list, mean);
             // The fitted dynamics' error moves every pass of the bin alike, so the passes'
             // scatter does not hold it: g' C g, g the bin's mean regressors of m, d0, d1 and
             // d2. Without it, on the independent rig's trapezoids of the heavy row (seed 1)
@@ -1590,6 +1585,39 @@ fn bin_curves(
     }
     diagnosis.force_error_before_percent = 100.0 * (before / scale.max(1e-300)).sqrt();
     diagnosis.force_error_after_percent = 100.0 * (after / scale.max(1e-300)).sqrt();
+}
+
+/// A bin's standard error from its passes, each (sum of its samples' forces about the curve's
+/// slope, their sum of squares, count), about the bin's `mean`.
+///
+/// Within a pass the errors of the dynamic terms taken out are correlated over the smoothing
+/// window, between passes they are not, so the scatter of the passes' means is what the bin's
+/// mean varies by: their weighted spread, times v / (v - 1) for v passes. Passes are counted
+/// by their weight, n^2 over the sum of the squared pass lengths: a pass that the position
+/// noise breaks at the bin's edge leaves one-sample fragments, whose scatter says nothing of
+/// the long pass that holds the mean. With fewer than [`MIN_WEIGHTED_PASSES`], the samples'
+/// own scatter is taken, not divided down. (On the independent rig's sweep draw 223, a
+/// force-controlled soft spring with 3.7 N of friction, two bins each held one slide of 28 and
+/// 32 samples and four one-sample fragments: their standard errors were 0.025 N, a seventh of
+/// their neighbours', their means 0.3 N off the law, and the true law failed force_max at
+/// 5.6 %.)
+fn pass_scatter_std(passes: &[(f64, f64, usize)], mean: f64) -> f64 {
+    let n = passes.iter().map(|p| p.2).sum::<usize>() as f64;
+    let squared_lengths: f64 = passes.iter().map(|p| (p.2 as f64).powi(2)).sum();
+    if n < 2.0 {
+        return 0.0;
+    }
+    if n * n / squared_lengths >= MIN_WEIGHTED_PASSES {
+        let v = passes.len() as f64;
+        let spread: f64 = passes
+            .iter()
+            .map(|&(sum, _, c)| (c as f64 / n).powi(2) * (sum / c as f64 - mean).powi(2))
+            .sum();
+        (spread * v / (v - 1.0)).sqrt()
+    } else {
+        let squares: f64 = passes.iter().map(|p| p.1).sum();
+        ((squares - n * mean * mean).max(0.0) / (n - 1.0)).sqrt()
+    }
 }
 
 /// The findings and the unresolved parameters, in words.
@@ -1662,6 +1690,83 @@ fn describe(d: &mut Diagnosis) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// One bin's passes from the given pass lengths: each pass's samples are its offset plus
+    /// white noise (standard deviation `noise`).
+    fn passes(
+        lengths: &[usize],
+        offsets: &[f64],
+        noise: f64,
+        rng: &mut impl rand::Rng,
+    ) -> Vec<(f64, f64, usize)> {
+        use rand_distr::{Distribution, Normal};
+        let white = Normal::new(0.0, noise).expect("a positive standard deviation");
+        lengths
+            .iter()
+            .zip(offsets)
+            .map(|(&c, &offset)| {
+                let samples: Vec<f64> = (0..c).map(|_| offset + white.sample(rng)).collect();
+                (samples.iter().sum(), samples.iter().map(|v| v * v).sum(), c)
+            })
+            .collect()
+    }
+
+    fn mean_of(passes: &[(f64, f64, usize)]) -> f64 {
+        passes.iter().map(|p| p.0).sum::<f64>() / passes.iter().map(|p| p.2).sum::<usize>() as f64
+    }
+
+    #[test]
+    fn passes_whose_errors_differ_give_the_spread_of_the_bins_mean() {
+        // Six passes of 20 samples, each off by its own error (0.3) plus white noise (0.1):
+        // the bin's mean varies by sqrt(0.3^2 / 6 + 0.1^2 / 120), and the passes' scatter
+        // estimates that variance without bias.
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, Normal};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(7);
+        let pass_error = Normal::new(0.0, 0.3).expect("a positive standard deviation");
+        let truth = 0.3_f64.powi(2) / 6.0 + 0.1_f64.powi(2) / 120.0;
+        let trials = 20_000;
+        let mean_variance = (0..trials)
+            .map(|_| {
+                let offsets: Vec<f64> = (0..6).map(|_| pass_error.sample(&mut rng)).collect();
+                let p = passes(&[20; 6], &offsets, 0.1, &mut rng);
+                pass_scatter_std(&p, mean_of(&p)).powi(2)
+            })
+            .sum::<f64>()
+            / trials as f64;
+        assert!(
+            (mean_variance / truth - 1.0).abs() < 0.03,
+            "{mean_variance} against {truth}"
+        );
+    }
+
+    #[test]
+    fn a_pass_broken_at_the_bins_edge_counts_as_one() {
+        // One slide of 32 samples and four one-sample fragments of it (the position noise
+        // crossing the bin's edge), all off by the slide's error: five passes by count, 1.26
+        // by weight. The standard error is the samples' own scatter, as for the unbroken pass
+        // of 36 samples; the fragments' scatter about the slide (a fifth of it and less) was
+        // taken before.
+        use rand::SeedableRng;
+        let mut rng = rand::rngs::StdRng::seed_from_u64(11);
+        let broken = passes(&[32, 1, 1, 1, 1], &[0.3; 5], 0.1, &mut rng);
+        let whole = vec![broken
+            .iter()
+            .fold((0.0, 0.0, 0), |a, p| (a.0 + p.0, a.1 + p.1, a.2 + p.2))];
+        let mean = mean_of(&broken);
+        let (b, w) = (
+            pass_scatter_std(&broken, mean),
+            pass_scatter_std(&whole, mean),
+        );
+        assert!((b - w).abs() <= 1e-12 * w, "{b} against {w}");
+        assert!(
+            (w / 0.1 - 1.0).abs() < 0.4,
+            "{w}: the samples' scatter, 0.1"
+        );
+        // Three equal passes are passes.
+        let three = passes(&[12, 12, 12], &[0.3, -0.3, 0.0], 0.1, &mut rng);
+        assert!(pass_scatter_std(&three, mean_of(&three)) > 0.1);
+    }
 
     /// A positive definite normal matrix with every parameter coupled to the friction.
     fn coupled() -> DMatrix<f64> {
