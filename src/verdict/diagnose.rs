@@ -310,9 +310,21 @@ pub struct Diagnosis {
     /// Every window tried (s) with its fit's reduced chi-square before transients were left
     /// out, which the choice compares (None: it failed).
     pub windows_tried: Vec<(f64, Option<f64>)>,
+    /// The log's travel back, over the fitted moving samples, as a share of its travel
+    /// forward (the smaller over the larger): below
+    /// [`crate::estimate::identify::REVERSAL_TRAVEL_SHARE`] the log moves one way only, and
+    /// the friction outside the cam cannot be told from the spring's force on that stroke.
+    pub reversal_travel_share: f64,
 }
 
 impl Diagnosis {
+    /// Whether the log moves one way only ([`Diagnosis::reversal_travel_share`]): its
+    /// outside friction is then a constant on the one stroke it logs, which the spring's
+    /// force takes up, and neither the build's spring nor the force curve is resolved.
+    pub fn moves_one_way(&self) -> bool {
+        self.reversal_travel_share < crate::estimate::identify::REVERSAL_TRAVEL_SHARE
+    }
+
     /// The fitted build (unresolved parameters at their fitted values).
     pub fn as_built(&self) -> AsBuilt {
         AsBuilt {
@@ -1460,7 +1472,39 @@ pub fn diagnose(
         bins: Vec::new(),
         sg_window_s: window_s,
         windows_tried: candidates,
+        reversal_travel_share: {
+            let (forward, back) = s.xd.iter().zip(&s.sgn).fold((0.0, 0.0), |(f, b), (v, g)| {
+                if *g > 0.0 {
+                    (f + v.abs(), b)
+                } else if *g < 0.0 {
+                    (f, b + v.abs())
+                } else {
+                    (f, b)
+                }
+            });
+            let most = f64::max(forward, back);
+            if most > 0.0 {
+                f64::min(forward, back) / most
+            } else {
+                0.0
+            }
+        },
     };
+    if diagnosis.moves_one_way() {
+        // The friction outside the cam is a constant on the one stroke logged: the build's
+        // spring takes it up, and what the fit finds of them is the trade, not the build.
+        // (Sweep draw 328 of the independent rig, a force-controlled rod that slides forward
+        // only: d0 0.97 +- 0.05 N against 2.13, and "the springs are 78.7 % softer than
+        // designed (+- 0.2 %)" for springs built as designed.)
+        for f in [
+            &mut diagnosis.spring_rate_scale,
+            &mut diagnosis.preload_offset_mm,
+            &mut diagnosis.friction,
+        ] {
+            f.resolved = false;
+        }
+        diagnosis.d0_n[1] = f64::INFINITY;
+    }
     bin_curves(design, &s, &p, &fit.cov, &mut diagnosis);
     describe(&mut diagnosis);
     Ok(diagnosis)
@@ -1627,12 +1671,25 @@ fn describe(d: &mut Diagnosis) {
     };
     let mut findings = Vec::new();
     let mut unresolved = Vec::new();
+    if d.moves_one_way() {
+        unresolved.push(format!(
+            "the log moves one way only (its travel back is {:.1} % of its travel forward): the \
+             friction outside the cam cannot be told from the spring's force on the one stroke \
+             logged, so neither the springs, the preload, the contact friction nor the force \
+             curve is resolved; a log that loads and unloads resolves them",
+            100.0 * d.reversal_travel_share
+        ));
+    }
     for (param, limit) in RESOLUTION {
         let f = *d.get(param);
         if f.fixed {
             continue;
         }
         if !f.resolved {
+            if d.moves_one_way() && param != BuildParam::Zero {
+                // Said once, above.
+                continue;
+            }
             unresolved.push(if f.zero_correlation.abs() > MAX_ZERO_CORRELATION {
                 format!(
                     "{}: not resolved apart from the encoder zero over this log (correlation \

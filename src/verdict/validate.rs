@@ -879,7 +879,9 @@ pub fn stroke_criteria(
             // A log without a bin on the corrected stroke (a force-controlled rod that sticks
             // most of the time, its rests left out for their friction) says nothing of the
             // force there: not judged, rather than failed at 0 %.
-            let judged = !points.is_empty();
+            // Nor does a log that moves one way only: its outside friction, a constant on
+            // that stroke, cannot be told from the spring's force ([`Diagnosis::moves_one_way`]).
+            let judged = !points.is_empty() && !d.moves_one_way();
             // `judged`: the deviation the pass is decided on.
             let mk = |name,
                       what: &'static str,
@@ -963,8 +965,10 @@ pub fn stroke_criteria(
                     what: "the measured quasi-static force, loading and unloading apart, against the 95 % band of builds within the spec's tolerances, lowest unloading to highest loading force (largest excursion beyond it)",
                     deviation_percent: 100.0 * worst,
                     tolerance_percent: 0.0,
-                    pass: !d.bins.is_empty() && exits.is_empty(),
-                    deviation_upper_percent: None,
+                    // A log that moves one way only does not resolve the force curve
+                    // ([`Diagnosis::moves_one_way`]): not judged.
+                    pass: d.moves_one_way() || (!d.bins.is_empty() && exits.is_empty()),
+                    deviation_upper_percent: d.moves_one_way().then_some(f64::INFINITY),
                 }],
                 exits,
             )
@@ -1257,6 +1261,7 @@ mod tests {
             bins,
             sg_window_s: 0.5,
             windows_tried: Vec::new(),
+            reversal_travel_share: 1.0,
         }
     }
 
@@ -1327,5 +1332,46 @@ mod tests {
         assert_eq!(c.len(), 2);
         assert!(c.iter().all(|c| c.pass && !c.shown()), "{c:?}");
         assert!(!conclusive(true, &c));
+    }
+
+    #[test]
+    fn a_log_that_moves_one_way_leaves_the_force_curve_unjudged() {
+        // Every bin 10 % above the law: a failure of both force criteria on a log that loads
+        // and unloads. A log whose travel back is 5 % of its travel forward cannot tell that
+        // from the friction outside the cam, on either kind of verdict.
+        use crate::model::FrictionCorrection;
+        use crate::verdict::diagnose::DiagnosisBin;
+        let law = ForceLaw::Exponential(ExpLaw {
+            mu_n: 10.0,
+            k2_per_mm: 0.1,
+            f0_n: 0.0,
+        });
+        let bins: Vec<DiagnosisBin> = (0..30)
+            .map(|k| {
+                let x = 0.5 + 0.5 * k as f64;
+                DiagnosisBin {
+                    x_mm: x,
+                    loading: true,
+                    measured_n: 1.1 * law.force_n(x),
+                    measured_std_n: 0.05,
+                    designed_n: law.force_n(x),
+                    refitted_n: law.force_n(x),
+                    samples: 100,
+                }
+            })
+            .collect();
+        let judge = |share: f64| {
+            let d = crate::verdict::diagnose::Diagnosis {
+                reversal_travel_share: share,
+                ..diagnosis(bins.clone())
+            };
+            stroke_criteria(&d, &law, FrictionCorrection::Loading, 0.03, None).0
+        };
+        let both_ways = judge(0.9);
+        assert!(both_ways.iter().all(|c| !c.pass), "{both_ways:?}");
+        assert!(judged(&both_ways));
+        let one_way = judge(0.05);
+        assert!(one_way.iter().all(|c| c.pass && !c.shown()), "{one_way:?}");
+        assert!(!judged(&one_way));
     }
 }

@@ -580,6 +580,26 @@ def test_a_slide_broken_at_a_bins_edge_does_not_fail_the_true_law(tmp_path):
     assert rc == 1 and not wrong["pass"], wrong["criteria"]
 
 
+def test_a_log_that_moves_one_way_judges_neither_the_springs_nor_the_force_curve(tmp_path):
+    """Sweep draw 328: a force-controlled rod with 2.13 N of friction that slides forward only
+    (9 % of the samples, 25 % of the stroke). On one stroke the friction outside the cam is a
+    constant the spring's force takes up: the diagnosis found "the springs are 78.7 % softer
+    than designed (+- 0.2 %)" for springs built as designed, and validate failed the true law
+    (force_rms 7.6 %). Now the diagnosis resolves neither the springs nor the friction and
+    says why, and validate judges neither law (NOT JUDGED, exit 2)."""
+    tr, log = sweep_log(tmp_path, 328)
+    diag = camspring("diagnose", spec(tmp_path / "d.toml", tr, 1.0), log, "--json", "--svg", tmp_path / "d.svg")
+    assert diag.returncode == 0, diag.stderr
+    d = json.loads(diag.stdout)
+    assert d["reversal_travel_share"] < 0.1, d["reversal_travel_share"]
+    assert not d["spring_rate_scale"]["resolved"] and not d["friction"]["resolved"], d
+    assert not any("springs" in f for f in d["findings"]), d["findings"]
+    assert any("moves one way only" in u for u in d["unresolved"]), d["unresolved"]
+    for k2_scale in (1.0, 1.05):
+        rc, v = validate_json(tmp_path, tr, log, k2_scale)
+        assert rc == 2 and not v["judged"], v["criteria"]
+
+
 def test_validate_weighs_the_acceleration_noise_when_it_chooses_the_diagnosis_window(tmp_path):
     """Sweep draw 65: a heavy transmission (m 0.49) on fast sines at four times the paper's
     noise, 100 Hz. The diagnosis weighted samples without the acceleration's noise through m,
