@@ -162,6 +162,30 @@ pub const INERTIA_KEEP_SHARE: f64 = 0.75;
 /// ten samples at rest put d0 at 1.97 +- 0.04 N against 3.45 (z -36).
 pub const REVERSAL_TRAVEL_SHARE: f64 = 0.1;
 
+/// A log's travel the way it moves less, as a share of its travel the way it moves more, from
+/// the velocities (mm/s) of its moving samples: 1 for a log that goes and comes back as far,
+/// 0 for one that moves one way only (and for no motion). Below [`REVERSAL_TRAVEL_SHARE`]
+/// the outside friction is a constant on the one stroke logged.
+pub fn reversal_travel_share(velocities: impl Iterator<Item = f64>) -> f64 {
+    let (forward, back) =
+        velocities.fold(
+            (0.0, 0.0),
+            |(f, b), v| {
+                if v > 0.0 {
+                    (f + v, b)
+                } else {
+                    (f, b - v)
+                }
+            },
+        );
+    let most = f64::max(forward, back);
+    if most > 0.0 {
+        f64::min(forward, back) / most
+    } else {
+        0.0
+    }
+}
+
 /// Smallest eigenvalue, relative to the largest, of the unit-diagonal normal matrix for which
 /// every parameter counts as identifiable (a condition number of 1e8).
 pub const IDENTIFIABILITY_LIMIT: f64 = 1e-8;
@@ -1763,14 +1787,7 @@ fn fit_regression(
         // way. Where the log's travel that way is a small share of its travel the first way,
         // those rows are the filter's ringing at the ends of one-way moves and its noise, at
         // rest with any friction in +-d0, and d0 would be fitted to them.
-        let (forward, backward) = moving.iter().fold((0.0, 0.0), |(f, b), &i| {
-            if motion[i] > 0.0 {
-                (f + motion[i], b)
-            } else {
-                (f, b - motion[i])
-            }
-        });
-        if forward.min(backward) < REVERSAL_TRAVEL_SHARE * forward.max(backward) {
+        if reversal_travel_share(moving.iter().map(|&i| motion[i])) < REVERSAL_TRAVEL_SHARE {
             active[D0] = false;
             p[D0] = 0.0;
             not_identifiable.push(PARAMS[D0].to_string());

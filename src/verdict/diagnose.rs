@@ -1472,23 +1472,13 @@ pub fn diagnose(
         bins: Vec::new(),
         sg_window_s: window_s,
         windows_tried: candidates,
-        reversal_travel_share: {
-            let (forward, back) = s.xd.iter().zip(&s.sgn).fold((0.0, 0.0), |(f, b), (v, g)| {
-                if *g > 0.0 {
-                    (f + v.abs(), b)
-                } else if *g < 0.0 {
-                    (f, b + v.abs())
-                } else {
-                    (f, b)
-                }
-            });
-            let most = f64::max(forward, back);
-            if most > 0.0 {
-                f64::min(forward, back) / most
-            } else {
-                0.0
-            }
-        },
+        // The moving samples' velocities, each signed as its friction is.
+        reversal_travel_share: crate::estimate::identify::reversal_travel_share(
+            s.xd.iter()
+                .zip(&s.sgn)
+                .filter(|(_, g)| **g != 0.0)
+                .map(|(v, g)| v.abs().copysign(*g)),
+        ),
     };
     if diagnosis.moves_one_way() {
         // The friction outside the cam is a constant on the one stroke logged: the build's
