@@ -230,6 +230,24 @@ pub struct Estimate {
     pub std: Option<f64>,
 }
 
+impl Estimate {
+    /// The estimate in words for a message: `0.11400 +- 0.00120 1/mm`, `0.11400 1/mm` without a
+    /// standard deviation, or `not identified` where the log gave it up (never `NaN`).
+    pub fn describe(&self, unit: &str) -> String {
+        match (self.value, self.std) {
+            (Some(v), Some(s)) => format!("{v:.5} +- {s:.5} {unit}"),
+            (Some(v), None) => format!("{v:.5} {unit}"),
+            (None, _) => "not identified".to_owned(),
+        }
+    }
+}
+
+/// The spring's curvature and exponential part as identification left them, for the messages
+/// that say they are not resolved ([`spring_resolved`]): `k2 = ... 1/mm, mu = ... N`.
+pub fn describe_spring(k2: &Estimate, mu: &Estimate) -> String {
+    format!("k2 = {}, mu = {}", k2.describe("1/mm"), mu.describe("N"))
+}
+
 /// One estimate per parameter.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Estimates([Estimate; 7]);

@@ -214,20 +214,16 @@ pub enum EstimateError {
     /// k2 = 2.19 +- 8.1 /mm against 0.114) it diverged at 24 s, and three recoveries diverged
     /// too.
     #[error(
-        "estimate: identification does not resolve the spring's curvature on this log (k2 = \
-         {k2_per_mm:.5} +- {k2_std:.5} 1/mm, mu = {mu_n:.5} +- {mu_std:.5} N), so the filter has \
-         nothing to start from and is not run; record a run over more of the stroke, slower, or \
-         with less sensor noise (identify says what the log lacks)"
+        "estimate: identification does not resolve the spring's curvature on this log ({}), so \
+         the filter has nothing to start from and is not run; record a run over more of the \
+         stroke, slower, or with less sensor noise (identify says what the log lacks)",
+        super::identify::describe_spring(.k2, .mu)
     )]
     SpringNotResolved {
-        /// Identification's k2 (1/mm).
-        k2_per_mm: f64,
-        /// Its standard deviation (1/mm).
-        k2_std: f64,
-        /// Identification's mu (N).
-        mu_n: f64,
-        /// Its standard deviation (N).
-        mu_std: f64,
+        /// Identification's k2 (1/mm), its value None where the log gave it up.
+        k2: super::identify::Estimate,
+        /// Identification's mu (N), its value None where the log gave it up.
+        mu: super::identify::Estimate,
     },
     /// Produced by [`estimate`] when identification, the filter's start, finds parameters of
     /// signs no transmission has: a sensor read reversed, or motion the model does not
@@ -991,14 +987,10 @@ where
                 return Err(EstimateError::SignFault(fault.clone()));
             }
             if !super::identify::spring_resolved(&id) {
-                let value = |p| id.get(p).value.unwrap_or(f64::NAN);
-                let std = |p| id.get(p).std.unwrap_or(f64::NAN);
                 use super::identify::Param::{Mu, K2};
                 return Err(EstimateError::SpringNotResolved {
-                    k2_per_mm: value(K2),
-                    k2_std: std(K2),
-                    mu_n: value(Mu),
-                    mu_std: std(Mu),
+                    k2: id.get(K2),
+                    mu: id.get(Mu),
                 });
             }
             let stroke = (lo - offset_mm).abs().max((hi - offset_mm).abs());
@@ -2414,6 +2406,42 @@ mod tests {
         assert_eq!(StateName::D2.index(), ekf::idx::D2);
         assert_eq!(StateName::parse(ekf::STATE_NAMES[6]), Some(StateName::K2));
         assert_eq!(StateName::parse("nope"), None);
+    }
+
+    #[test]
+    fn a_spring_identification_gave_up_is_named_not_printed_as_nan() {
+        use super::super::identify::Estimate;
+        let given_up = EstimateError::SpringNotResolved {
+            k2: Estimate {
+                value: None,
+                std: None,
+            },
+            mu: Estimate {
+                value: Some(0.00034),
+                std: Some(0.0014),
+            },
+        }
+        .to_string();
+        assert!(!given_up.contains("NaN"), "{given_up}");
+        assert!(
+            given_up.contains("k2 = not identified, mu = 0.00034 +- 0.00140 N"),
+            "{given_up}"
+        );
+        let unbounded = EstimateError::SpringNotResolved {
+            k2: Estimate {
+                value: Some(0.61),
+                std: Some(0.27),
+            },
+            mu: Estimate {
+                value: Some(1.2),
+                std: None,
+            },
+        }
+        .to_string();
+        assert!(
+            unbounded.contains("k2 = 0.61000 +- 0.27000 1/mm, mu = 1.20000 N"),
+            "{unbounded}"
+        );
     }
 }
 

@@ -346,18 +346,15 @@ pub fn format_identification(id: &Identification, noise: &ResolvedNoise) -> Stri
          quasi-static samples alone {:.5} 1/mm",
         id.residual_rms_n, id.reduced_chi2, id.condition_number, id.k2_quasi_static_per_mm
     );
-    let (k2, mu) = (id.get(Param::K2), id.get(Param::Mu));
-    if let (Some(v), Some(sd), Some(mv), Some(msd)) = (k2.value, k2.std, mu.value, mu.std) {
-        if !crate::estimate::identify::spring_resolved(id) {
-            let _ = writeln!(
-                s,
-                "warning: this log does not resolve the spring's curvature (k2 = {v:.5} +- {sd:.5} \
-                 1/mm, mu = {mv:.5} +- {msd:.5} N): their standard deviations do not bound k2, or \
-                 do not tell the exponential part from zero, and mu, F0 and k2 trade off. Record \
-                 a run over more of the stroke, slower (less inertia force against the spring's) \
-                 or with less sensor noise"
-            );
-        }
+    if !crate::estimate::identify::spring_resolved(id) {
+        let _ = writeln!(
+            s,
+            "warning: this log does not resolve the spring's curvature ({}): their standard \
+             deviations do not bound k2, or do not tell the exponential part from zero, and mu, \
+             F0 and k2 trade off. Record a run over more of the stroke, slower (less inertia \
+             force against the spring's) or with less sensor noise",
+            crate::estimate::identify::describe_spring(&id.get(Param::K2), &id.get(Param::Mu))
+        );
     }
     for (p, rel, longer) in id.imprecise() {
         let _ = writeln!(
