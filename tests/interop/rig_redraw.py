@@ -8,6 +8,9 @@ largest |z|, with z = (estimate - truth) / reported std. Honest deviations give 
 near 1; a covariance that ignored the residuals' correlation gives 2 to 5.
 
     .venv/bin/python tests/interop/rig_redraw.py ROW PROFILE SEED REDRAWS [identify args...]
+    .venv/bin/python tests/interop/rig_redraw.py sweep DRAW REDRAWS [identify args...]
+
+The second form redraws rig_sweep.py's draw DRAW (its rig's noise level).
 
 CAMSPRING_BIN names the binary (default target/release/camspring).
 """
@@ -29,15 +32,26 @@ def redraws(row, profile, seed, count, args=(), seconds=300, folder=None):
     """Returns (truth, estimates, stds, windows): the truth as a dict of KEYS' short names, two
     (count, 7) arrays in KEYS order (NaN where identify reports a parameter as not
     identifiable) and the window each redraw's identification chose (s)."""
-    tr = ROWS[row]
-    rig = Rig(seed=seed)
+    return redraws_of(ROWS[row], Rig(seed=seed), profile, 10_000 + seed, count, args, seconds, folder)
+
+
+def sweep_redraws(i, count, args=(), seconds=300, folder=None):
+    """redraws() of rig_sweep.py's draw `i`: its transmission, rig, profile and noise level."""
+    from rig_sweep import draw
+
+    tr, profile, rig, _ = draw(i)
+    return redraws_of(tr, rig, profile, 20_000 + i, count, args, seconds, folder)
+
+
+def redraws_of(tr, rig, profile, noise_seed, count, args=(), seconds=300, folder=None):
+    """redraws() of one transmission on one rig and profile, the noise seeded by `noise_seed`."""
     n = int(round(seconds * rig.rate_hz))
     t = np.arange(n) / rig.rate_hz
-    # The speed (and truth) of the matrix's run of this seed, then the same motion again.
-    matrix_truth = run(tr, rig, profile, seconds)[3]
-    truth = {name: matrix_truth[name] for _, name in KEYS}
-    x, _, _, f = motion(tr, rig, profile, t, 15.0, matrix_truth["speed"], np.random.default_rng(seed))
-    noise = np.random.default_rng(10_000 + seed)
+    # The speed (and truth) of the rig's run, then the same motion again.
+    run_truth = run(tr, rig, profile, seconds)[3]
+    truth = {name: run_truth[name] for _, name in KEYS}
+    x, _, _, f = motion(tr, rig, profile, t, 15.0, run_truth["speed"], np.random.default_rng(rig.seed))
+    noise = np.random.default_rng(noise_seed)
     values, stds, windows = [], [], []
     with tempfile.TemporaryDirectory(dir=folder) as tmp:
         log = pathlib.Path(tmp) / "redraw.tsv"
@@ -73,13 +87,21 @@ def summary(truth, values, stds):
 
 
 if __name__ == "__main__":
-    row, profile, seed, count = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
-    truth, values, stds, windows = redraws(row, profile, seed, count, sys.argv[5:])
+    if sys.argv[1] == "sweep":
+        i, count = int(sys.argv[2]), int(sys.argv[3])
+        rest = sys.argv[4:]
+        title = f"sweep draw {i}"
+        truth, values, stds, windows = sweep_redraws(i, count, rest)
+    else:
+        row, profile, seed, count = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
+        rest = sys.argv[5:]
+        title = f"{row} {profile} seed {seed}"
+        truth, values, stds, windows = redraws(row, profile, seed, count, rest)
     if os.environ.get("REDRAW_EACH"):
         for k in range(count):
             z = ["%s %+.1f" % (name, (values[k, i] - truth[name]) / stds[k, i]) for i, (_, name) in enumerate(KEYS)]
             print(f"redraw {k}: window {windows[k]:.2f} s,", ", ".join(z))
-    print(f"{row} {profile} seed {seed}, {count} redraws, {os.path.basename(BIN)} {' '.join(sys.argv[5:])}")
+    print(f"{title}, {count} redraws, {os.path.basename(BIN)} {' '.join(rest)}")
     print("| parameter | identified | spread | mean reported std (cv) | bias | rms z | max abs z |")
     print("| --- | --- | --- | --- | --- | --- | --- |")
     for name, r in summary(truth, values, stds).items():
