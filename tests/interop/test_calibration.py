@@ -816,7 +816,7 @@ def test_the_filters_bias_on_a_sticking_rod_is_read_from_the_longer_window(tmp_p
     deviation on others: mean reported deviations 3.5 to 3.8 times the estimates' rms error. The
     longer window's change, less noisy, is now the witness: every parameter's rms z at most
     1.5 and none beyond 4.5, and the spring's mean reported deviation within twice its rms
-    error (1.18 to 1.31)."""
+    error (1.00 each, capped at 1.5 of the chosen window's deviation; 1.18 to 1.31 uncapped)."""
     from rig_redraw import summary, sweep_redraws
 
     truth, values, stds, _ = sweep_redraws(338, 24, folder=tmp_path)
