@@ -437,11 +437,15 @@ fn estimate_warns_when_the_log_is_too_short_for_its_target_and_says_how_much_lon
     let long = run(30.0 * longest * 1.5);
     // The filter's own standard deviations reach the target. One may still be held above it
     // by the filter's disagreement with identification, which a longer log shrinks only if it
-    // is random; the warning then says so.
+    // is random, or (M) by identification's own deviation where that is mostly the allowance
+    // for its differentiating filter's bias; the warning then says so, and promises no length.
+    // (Seed 5's 148 s log: identification's m 0.0504 +- 0.0036, nearly all of it that
+    // allowance, held the filter's M at 1.8 %, where the 30 s log had promised the target at
+    // 1.9 times its length.)
     let left = long.imprecise();
     assert!(
-        left.iter()
-            .all(|w| w.log_length_factor.is_none() && w.relative_disagreement.is_some()),
+        left.iter().all(|w| w.log_length_factor.is_none()
+            && (w.relative_disagreement.is_some() || w.relative_identification_bias.is_some())),
         "{left:?}"
     );
 }

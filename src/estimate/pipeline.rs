@@ -190,11 +190,18 @@ pub struct Imprecision {
     /// How many times longer a log of the same kind would have to be for the filter's own
     /// standard deviation to reach the target (its variance falls as 1 / duration). None when
     /// that one already does, and the standard deviation is held to the filter's
-    /// disagreement with identification, which a longer log reduces only if it is random.
+    /// disagreement with identification, which a longer log reduces only if it is random; or
+    /// when it is held to identification's, mostly a filter bias
+    /// (`relative_identification_bias`).
     pub log_length_factor: Option<f64>,
     /// The disagreement with identification, relative to the value, when it holds the
     /// standard deviation above the filter's own.
     pub relative_disagreement: Option<f64>,
+    /// Identification's allowance for its differentiating filter's bias on the same constant,
+    /// relative to the value, when the filter's own standard deviation is held to
+    /// identification's (M, [`M_PRECISION_GAIN_MAX`]) and that allowance is most of
+    /// identification's variance: a longer log shrinks it only where it is noise.
+    pub relative_identification_bias: Option<f64>,
 }
 
 /// Why the estimation failed.
@@ -288,11 +295,23 @@ impl EstimateRun {
                     .flatten()
                     .filter(|_| held)
                     .map(|v| (z[k] - v).abs() / scale);
+                let identification_bias = (k == ekf::idx::M)
+                    .then(|| {
+                        let id = self.identification.as_ref()?;
+                        let s_id = id.get(Param::M).std?;
+                        let bias = id.filter_bias_std[Param::M.index()];
+                        let floor = s_id / M_PRECISION_GAIN_MAX;
+                        (own * scale <= floor * (1.0 + 1e-9) && bias * bias > 0.5 * s_id * s_id)
+                            .then_some(bias / scale)
+                    })
+                    .flatten();
                 Some(Imprecision {
                     state: ekf::STATE_NAMES[k],
                     relative_std: rel,
-                    log_length_factor: (2.0 * own > target).then(|| (2.0 * own / target).powi(2)),
+                    log_length_factor: (2.0 * own > target && identification_bias.is_none())
+                        .then(|| (2.0 * own / target).powi(2)),
                     relative_disagreement: disagreement,
+                    relative_identification_bias: identification_bias,
                 })
             })
             .collect()

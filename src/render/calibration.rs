@@ -463,6 +463,7 @@ pub fn estimate_json(est: &EstimateRun) -> Value {
             "state": w.state, "relative_std": w.relative_std,
             "log_length_factor_for_target": w.log_length_factor,
             "relative_disagreement_with_identification": w.relative_disagreement,
+            "relative_identification_filter_bias": w.relative_identification_bias,
         })).collect::<Vec<_>>(),
         "recovery": est.recovery,
         "twins": est.twins,
@@ -534,8 +535,20 @@ pub fn format_consistency(est: &EstimateRun) -> String {
             Some(longer) => {
                 format!("needs a log about {longer:.1} times longer, or one with more motion")
             }
+            None if w.relative_identification_bias.is_some() => String::new(),
             None => "is met by the filter's own standard deviation".to_string(),
         };
+        if let Some(b) = w.relative_identification_bias {
+            remedy.push_str(&format!(
+                "is held by identification's {} (the filter claims it at most {} times more \
+                 precisely), whose deviation is mostly the allowance for its differentiating \
+                 filter's bias ({:.2} %): a longer log reduces that only where it is noise, and \
+                 a log with smoother accelerations (sines) or more motion resolves it better",
+                w.state,
+                crate::estimate::pipeline::M_PRECISION_GAIN_MAX,
+                100.0 * b
+            ));
+        }
         if let Some(d) = w.relative_disagreement {
             remedy.push_str(&format!(
                 "; the standard deviation is held to the filter's disagreement with \
