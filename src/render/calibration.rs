@@ -540,11 +540,11 @@ pub fn format_consistency(est: &EstimateRun) -> String {
         };
         if let Some(b) = w.relative_identification_bias {
             remedy.push_str(&format!(
-                "is held by identification's {} (the filter claims it at most {} times more \
-                 precisely), whose deviation is mostly the allowance for its differentiating \
-                 filter's bias ({:.2} %): a longer log reduces that only where it is noise, and \
-                 a log with smoother accelerations (sines) or more motion resolves it better",
-                w.state,
+                "is not met: the filter's own standard deviation is held to 1/{} of \
+                 identification's, which is mostly the allowance for identification's \
+                 differentiating filter's bias ({:.2} %); a longer log reduces that only where \
+                 it is noise, and a log with smoother accelerations (sines) or more motion \
+                 resolves it better",
                 crate::estimate::pipeline::M_PRECISION_GAIN_MAX,
                 100.0 * b
             ));
