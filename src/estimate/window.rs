@@ -316,16 +316,16 @@ pub fn choose_window(
         .collect();
     // The next shorter and the next longer admissible windows, whose estimates bound the
     // filter's bias at the chosen one.
-    let reported = |i: usize| fits[i].as_ref().ok().map(|id| id.parameters);
+    let estimates = |i: usize| fits[i].as_ref().ok().map(|id| id.parameters);
     let shorter = admissible
         .iter()
         .rev()
         .find(|&&i| i < chosen)
-        .and_then(|&i| reported(i));
+        .and_then(|&i| estimates(i));
     let longer = admissible
         .iter()
         .find(|&&i| i > chosen)
-        .and_then(|&i| reported(i));
+        .and_then(|&i| estimates(i));
     let mut id = fits
         .into_iter()
         .nth(chosen)
@@ -373,11 +373,11 @@ fn lone_inertia(
 /// 269 and five later ones, estimates beyond 3 of their deviations went from 19 to 10 of
 /// 1 784 and beyond 4 from 7 to 1, the rms z staying 1.00, with the longer window's
 /// allowance at most [`LONGER_BIAS_MAX_SIGMAS`] (docs/CALIBRATION.md, "The filter's bias
-/// from the longer window"). m keeps the shorter witness: its change to a longer window holds that window's
-/// greater loss of acceleration gain, which [`super::identify::correct_inertia`] takes out of the chosen one
-/// alone; with the longer witness m's deviations on the sweep widened (a tenth of them by 2.7
-/// times or more) and none fewer stood beyond 3. On a log the filter follows, the allowance
-/// is zero on average.
+/// from the longer window"). m keeps the shorter witness: its change to a longer window holds
+/// that window's greater loss of acceleration gain, which
+/// [`super::identify::correct_inertia`] takes out of the chosen one alone; with the longer
+/// witness, capped as for the others, m's estimates beyond 3 deviations on the sweep went from
+/// 2 to 4. On a log the filter follows, the allowance is zero on average.
 fn add_filter_bias(
     id: &mut Identification,
     shorter: Option<&Estimates>,
@@ -391,16 +391,16 @@ fn add_filter_bias(
         };
         // The change's noise: the difference of the two windows' variances (nested fits), as
         // it stands for the shorter window and either way round for the longer.
-        let witness = |w: Option<&Estimates>, per_change: f64, longer: bool| {
+        let witness = |w: Option<&Estimates>, per_change: f64, is_longer: bool| {
             let a = w?.get(p);
             let (va, sa) = (a.value?, a.std?);
-            let noise = if longer {
+            let noise = if is_longer {
                 (sa * sa - sb * sb).abs()
             } else {
                 (sa * sa - sb * sb).max(0.0)
             };
             let systematic = ((per_change * (va - vb)).powi(2) - noise).max(0.0);
-            Some(if longer {
+            Some(if is_longer {
                 systematic.min((LONGER_BIAS_MAX_SIGMAS * sb).powi(2))
             } else {
                 systematic
