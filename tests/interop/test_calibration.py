@@ -552,6 +552,18 @@ def test_a_cubic_damper_read_by_a_fine_encoder_at_1_khz_is_not_lost_in_the_paral
     assert j["parameters"]["d2_n_s3_per_mm3"] is not None, j["not_identifiable"]
 
 
+@pytest.mark.parametrize("i", [358, 471])
+def test_an_inertia_with_no_shorter_witness_takes_the_filters_bias_from_the_longer_window(tmp_path, i):
+    """Sweep draws 358 (force-controlled, 1 kHz, m 0.093) and 471 (heavy trapezoids, 1 kHz,
+    m 0.46): no shorter admissible window keeps m, so m had no filter-bias allowance at all,
+    and came out at z -3.5 and +3.3, reported as fits. m now takes its allowance from the next
+    longer window where no shorter one keeps it: every estimate within three standard
+    deviations, m kept, with a filter-bias allowance."""
+    j = fitting_sweep_draw(tmp_path, i)
+    assert j["parameters"]["m_n_s2_per_mm"] is not None, j["not_identifiable"]
+    assert j["filter_bias_std"][0] > 0.0, j["filter_bias_std"]
+
+
 @pytest.mark.parametrize("i", [134, 184])
 def test_an_inertia_only_one_window_keeps_is_given_up_on_a_servos_ramps(tmp_path, i):
     """Sweep draws 134 (500 Hz, m 0.036) and 184 (1 kHz, m 0.070, d1 2.66): a servo's ramp-holds,
