@@ -6,9 +6,11 @@ a quarter to four times the paper's; 300 s logs through the real binary's identi
 and validate (the true law, and one with k2 5 % high, at --tolerance 3%). Prints one line per
 draw; a draw the rig cannot run (no speed keeps the damper force rising) says so.
 
-    .venv/bin/python tests/interop/rig_sweep.py FIRST LAST
+    .venv/bin/python tests/interop/rig_sweep.py [--encoder] FIRST LAST
 
-FIRST and LAST are draw numbers (each draw is seeded by its number, so a line can be
+With --encoder the same transmissions, profiles and rates are read by a digital encoder: no
+analog position noise, steps of 1 to 20 um (log-uniform, seeded by the draw's number apart
+from the rest), the force noise as drawn. FIRST and LAST are draw numbers (each draw is seeded by its number, so a line can be
 reproduced alone). CAMSPRING_BIN names the binary (default target/release/camspring).
 """
 import json
@@ -16,6 +18,7 @@ import math
 import pathlib
 import sys
 import tempfile
+from functools import partial
 from multiprocessing import Pool
 
 import numpy as np
@@ -43,10 +46,23 @@ def draw(i):
     return tr, PROFILES[i % len(PROFILES)], rig, scale
 
 
-def case(i, seconds=300.0):
-    tr, profile, rig, scale = draw(i)
+def encoder_draw(i):
+    """Draw `i` read by a digital encoder: the transmission, profile, rate and force noise of
+    [`draw`], the position quantised in steps of 1 to 20 um with no other noise. The last
+    element is the step in um."""
+    tr, profile, rig, _ = draw(i)
+    r = np.random.default_rng(5000 + i)
+    step_mm = float(math.exp(r.uniform(math.log(0.001), math.log(0.02))))
+    rig = Rig(rate_hz=rig.rate_hz, force_variance=rig.force_variance, position_variance=0.0,
+              encoder_step_mm=step_mm, seed=i)
+    return tr, profile, rig, step_mm * 1000.0
+
+
+def case(i, seconds=300.0, encoder=False):
+    tr, profile, rig, scale = (encoder_draw if encoder else draw)(i)
+    sensor = f"encoder {scale:.1f} um" if encoder else f"noise x{scale:.2f}"
     tag = (f"#{i:3d} {profile:9s} m {tr.m:.3f} d0 {tr.d0:.2f} d1 {tr.d1:.2f} d2 {tr.d2:.4f} "
-           f"k2 {tr.k2:.3f} {rig.rate_hz:.0f} Hz noise x{scale:.2f}")
+           f"k2 {tr.k2:.3f} {rig.rate_hz:.0f} Hz {sensor}")
     with tempfile.TemporaryDirectory() as d:
         tmp = pathlib.Path(d)
         try:
@@ -83,9 +99,11 @@ def case(i, seconds=300.0):
 
 
 def main():
-    first, last = int(sys.argv[1]), int(sys.argv[2])
+    args = sys.argv[1:]
+    encoder = "--encoder" in args
+    first, last = (int(a) for a in args if a != "--encoder")
     with Pool(2) as pool:
-        for line in pool.imap(case, range(first, last)):
+        for line in pool.imap(partial(case, encoder=encoder), range(first, last)):
             print(line, flush=True)
 
 
