@@ -57,8 +57,8 @@ use super::log::{CalibrationLog, MIN_LOG_SAMPLES};
 use super::sg::{self, Differentiator};
 pub use super::window::{
     candidate_windows, choose_window, fit_with_noise_uncertainty, WindowCandidate, WindowChoice,
-    WindowMethod, BALANCING_SIGMAS, CHI2_RISE_MIN, CHI2_RISE_SIGMAS, LONGEST_WINDOW_S,
-    SHORTEST_WINDOW_S, SHORTEST_WINDOW_SAMPLES, WINDOW_RATIO,
+    WindowMethod, BALANCING_SIGMAS, CHI2_RISE_MIN, LONGEST_WINDOW_S, SHORTEST_WINDOW_S,
+    SHORTEST_WINDOW_SAMPLES, WINDOW_RATIO,
 };
 
 /// Parameter names in model order (the JSON keys, with units).
@@ -1977,12 +1977,18 @@ fn fit_regression(
     // steps: the acceleration is there), the m fitted to what is left is chosen by its own
     // residuals: on the independent rig's servo log of a heavy transmission (m 0.36, d0 3.7 N,
     // 500 Hz), 46 % of the signal went with the transients and m came out 0.038 +- 0.057, z -5.7.
-    // It is given up there, unless the fit without it explains what is left clearly worse
-    // (its reduced chi-square higher by more than the window choice's tolerance): then the
-    // inertia force is in the samples kept. (A fine encoder on a heavy servo, regressed
+    // It is given up there, unless the fit went through the parallel filter, which follows
+    // the corners, and the fit without m explains what is left clearly worse (its reduced
+    // chi-square higher by more than the window choice's tolerance): then the inertia force
+    // is in the samples kept. Regressed directly, a fit without m is worse there too, by the
+    // tails of the transients the filter smears, and m is still chosen by its own residuals
+    // (kept there, a force-controlled sweep log's 1.21 s window became the longer witness of
+    // the chosen 0.61 s, with F0 as biased as the chosen one's: F0's allowance went from 4 to
+    // 0 of its deviations, z -4.8). (A fine encoder on a heavy servo, regressed
     // through the parallel filter: the rests beside the velocity steps are left out as
-    // transients, yet the ramps' lag keeps m resolved, 0.230 against 0.243, and without it
-    // the reduced chi-square went from 1.55 to 214 at every window, "does not fit".) Glitches
+    // transients, yet the ramps' lag keeps m resolved, 0.230 against 0.243; without it the
+    // reduced chi-square went from 1.55 to 214 at 0.15 s, and was 60 to 234 at every window,
+    // "does not fit".) Glitches
     // take a window or two each (at least 97 % stays).
     if transient_samples > 0
         && active[M]
@@ -1992,9 +1998,9 @@ fn fit_regression(
             let with_m = reduced_chi_square(&p, &rows, &active, &weights_at(&p, &rows));
             let (r, q, a) = (&refit.0, &refit.1, &refit.2);
             let without_m = reduced_chi_square(q, r, a, &weights_at(q, r));
-            let rise =
-                (CHI2_RISE_SIGMAS * (2.0 / r.f.len().max(1) as f64).sqrt()).max(CHI2_RISE_MIN);
-            if without_m <= with_m * (1.0 + rise) {
+            let explains_worse =
+                without_m > with_m * (1.0 + super::window::chi2_rise_tolerance(r.f.len()));
+            if !(rows.filtered.is_some() && explains_worse) {
                 (rows, p, active, not_identifiable, paper_covariance_k2_fixed) = refit;
             }
         }

@@ -525,10 +525,16 @@ fn add_noise_uncertainty(id: &mut Identification, raised: &Estimates) {
 /// after, a slow ramp-hold's wrong friction signs at reversals, left out at 3.4 s, let the
 /// choice go on to 4.8 s, where k2's deviation is about 1.3 times too small.)
 fn distorted(short: &Identification, long: &Identification) -> bool {
-    let dof = long.dynamic_samples.max(1) as f64;
-    let rise = (CHI2_RISE_SIGMAS * (2.0 / dof).sqrt()).max(CHI2_RISE_MIN);
+    let rise = chi2_rise_tolerance(long.dynamic_samples);
     let noise = 2.0 * (long.reduced_chi2_noise_change - short.reduced_chi2_noise_change).abs();
     long.reduced_chi2_with_transients > short.reduced_chi2_with_transients * (1.0 + rise) + noise
+}
+
+/// The relative rise of a reduced chi-square over `rows` rows beyond which a fit explains them
+/// clearly worse: [`CHI2_RISE_SIGMAS`] of the statistic's standard deviation sqrt(2 / rows), and
+/// at least [`CHI2_RISE_MIN`].
+pub(super) fn chi2_rise_tolerance(rows: usize) -> f64 {
+    (CHI2_RISE_SIGMAS * (2.0 / rows.max(1) as f64).sqrt()).max(CHI2_RISE_MIN)
 }
 
 /// Whether two fits identify the same parameters.

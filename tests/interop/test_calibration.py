@@ -559,9 +559,9 @@ def test_a_heavy_servo_read_by_a_fine_encoder_keeps_its_inertia(tmp_path):
     filter m was resolved (reduced chi-square 1.55 at 0.15 s), but the rests beside the
     velocity steps were left out as transients, which took most of the filtered acceleration's
     signal, so m was given up; without it the reduced chi-square was 60 to 234 at every
-    window, and identify said the model does not fit this log. m is now kept where the fit
-    without it explains the samples left clearly worse: the fit explains the log, m is kept,
-    and every estimate is within three standard deviations."""
+    window, and identify said the model does not fit this log. Through the parallel filter, m
+    is now kept where the fit without it explains the samples left clearly worse: the fit
+    explains the log, m is kept, and every estimate is within three standard deviations."""
     j = fitting_sweep_draw(tmp_path, 39, encoder=True)
     assert j["parameters"]["m_n_s2_per_mm"] is not None, j["not_identifiable"]
     assert j["transient_samples"] > 0
