@@ -1977,19 +1977,12 @@ fn fit_regression(
     // steps: the acceleration is there), the m fitted to what is left is chosen by its own
     // residuals: on the independent rig's servo log of a heavy transmission (m 0.36, d0 3.7 N,
     // 500 Hz), 46 % of the signal went with the transients and m came out 0.038 +- 0.057, z -5.7.
-    // It is given up there, unless the fit went through the parallel filter, which follows
-    // the corners, and the fit without m explains what is left clearly worse (its reduced
-    // chi-square higher by more than the window choice's tolerance): then the inertia force
-    // is in the samples kept. Regressed directly, a fit without m is worse there too, by the
-    // tails of the transients the filter smears, and m is still chosen by its own residuals
-    // (kept there, a force-controlled sweep log's 1.21 s window became the longer witness of
-    // the chosen 0.61 s, with F0 as biased as the chosen one's: F0's allowance went from 4 to
-    // 0 of its deviations, z -4.8). (A fine encoder on a heavy servo, regressed
-    // through the parallel filter: the rests beside the velocity steps are left out as
-    // transients, yet the ramps' lag keeps m resolved, 0.230 against 0.243; without it the
-    // reduced chi-square went from 1.55 to 214 at 0.15 s, and was 60 to 234 at every window,
-    // "does not fit".) Glitches
-    // take a window or two each (at least 97 % stays).
+    // It is given up there, except through the parallel filter, which follows the corners,
+    // where the fit without m explains what is left clearly worse (a fine encoder on a heavy
+    // servo: m resolved, 0.230 against 0.243, and the reduced chi-square 60 to 234 without it
+    // at every window). Regressed directly, a fit without m is worse by the smeared
+    // transients' tails too, and m stays given up. Glitches take a window or two each (at
+    // least 97 % stays).
     if transient_samples > 0
         && active[M]
         && inertia_signal(&rows) < INERTIA_KEEP_SHARE * inertia_signal_before
