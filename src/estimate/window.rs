@@ -533,7 +533,7 @@ fn distorted(short: &Identification, long: &Identification) -> bool {
 /// The relative rise of a reduced chi-square over `rows` rows beyond which a fit explains them
 /// clearly worse: [`CHI2_RISE_SIGMAS`] of the statistic's standard deviation sqrt(2 / rows), and
 /// at least [`CHI2_RISE_MIN`].
-pub(super) fn chi2_rise_tolerance(rows: usize) -> f64 {
+pub fn chi2_rise_tolerance(rows: usize) -> f64 {
     (CHI2_RISE_SIGMAS * (2.0 / rows.max(1) as f64).sqrt()).max(CHI2_RISE_MIN)
 }
 
