@@ -1371,16 +1371,16 @@ pub fn diagnose(
     // chi-squares with them 5.1 to 5.6 from 0.2 to 3.2 s, and the smallest, at 2.27 s, had d0
     // at half the truth and d1 35 % high: the true law failed force_max (4.2 %).
     let smallest_where = |keep: &dyn Fn(&WindowFit) -> bool| {
-        let kept = || {
+        let eligible = || {
             compared
                 .iter()
                 .enumerate()
                 .filter_map(|(i, f)| f.filter(|f| keep(f)).map(|f| (i, f)))
         };
-        let least = kept()
+        let least = eligible()
             .map(|(_, f)| f.reduced_chi2_with_transients)
             .min_by(f64::total_cmp)?;
-        kept()
+        eligible()
             .find(|(_, f)| {
                 f.reduced_chi2_with_transients
                     <= least * (1.0 + chi2_rise_tolerance(f.samples.x.len()))
