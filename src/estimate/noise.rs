@@ -8,6 +8,7 @@ use serde::Serialize;
 use super::allan::{allan_variance, white_noise_fit, AllanPoint, WhiteNoiseFit};
 use super::identify::SensorNoise;
 use super::log::CalibrationLog;
+use super::quantisation::Quantisation;
 use super::sg::Differentiator;
 
 /// One channel's noise model.
@@ -47,6 +48,7 @@ impl NoiseModel {
             force_variance_n2: self.channels[0].fit.variance,
             position_variance_mm2: self.channels[1].fit.variance,
             position_variance_relative_std: 0.0,
+            position_quantisation: None,
         }
     }
 }
@@ -205,6 +207,11 @@ impl DifferenceNoise {
         // a slow sawtooth in between, which the differences count low. What the smoothing
         // kernels pass on lies between the two; the midpoint is taken, its half-range added to
         // the relative standard deviation.
+        // The differences of a quantised ramp count its error up to twice the uniform error's
+        // variance (a rod moving half a step a sample steps every other sample, and its
+        // second differences are +-q, twice white noise's of variance q^2 / 12): up to
+        // [`QUANTISED_MAX_RATIO`] of it, the steps still make the noise, and the step is
+        // reported with the differences' estimate.
         match lattice_step(&self.steps) {
             Some(step) if step * step / 12.0 > white.variance => {
                 let uniform = step * step / 12.0;
@@ -212,6 +219,12 @@ impl DifferenceNoise {
                 Some(DifferenceEstimate {
                     variance: 0.5 * (uniform + white.variance),
                     relative_std: white.relative_std.hypot(spread),
+                    quantum: Some(step),
+                    ..white
+                })
+            }
+            Some(step) if white.variance <= QUANTISED_MAX_RATIO * step * step / 12.0 => {
+                Some(DifferenceEstimate {
                     quantum: Some(step),
                     ..white
                 })
@@ -227,6 +240,18 @@ impl DifferenceNoise {
         d.estimate()
     }
 }
+
+/// The most the differences' white-noise estimate of a signal on a lattice may exceed the
+/// uniform error's variance q^2 / 12 by, as a factor, for its steps to be taken as its noise
+/// ([`DifferenceNoise::estimate`]). Beyond it the signal carries noise of its own of more
+/// than about a third of a step, which dithers the steps into white noise.
+pub const QUANTISED_MAX_RATIO: f64 = 2.0;
+
+/// How well identification's model of a quantised position's error through its kernels
+/// ([`super::quantisation`]) knows the error's power, relative: the model against the true
+/// error of the independent rig's encoder draws (docs/CALIBRATION.md, "A quantised position
+/// through the kernels"). Carried into the estimates as the position variance's uncertainty.
+pub const QUANTISATION_MODEL_RELATIVE_STD: f64 = 0.2;
 
 /// The step of a quantised signal: the least nonzero first difference, when at least 99 % of
 /// them are whole multiples of it (within 5 % of a step). None for a signal that is not
@@ -475,7 +500,23 @@ impl GivenNoise {
         );
         // How well the position's variance is known, for identification to carry into its
         // estimates: the log's estimate's spread (a given figure is taken as exact).
+        // A position read in steps whose error is its noise: identification takes what its
+        // kernels pass of the steps' error from the speeds the log moves at, to within
+        // [`QUANTISATION_MODEL_RELATIVE_STD`].
+        let position_quantisation = match (position_origin, log) {
+            (NoiseOrigin::Log, Some(l)) => l.position.quantum.map(|step| Quantisation {
+                step_mm: step,
+                block: 1,
+                variance_scale: 1.0,
+                kernel_shares: None,
+            }),
+            _ => None,
+        };
         let position_variance_relative_std = match (position_origin, log) {
+            (NoiseOrigin::Log, Some(l)) if position_quantisation.is_some() => l
+                .position
+                .relative_std
+                .hypot(QUANTISATION_MODEL_RELATIVE_STD),
             (NoiseOrigin::Log, Some(l)) => l.position.relative_std,
             _ => 0.0,
         };
@@ -484,6 +525,7 @@ impl GivenNoise {
                 force_variance_n2: force.max(MIN_NOISE_VARIANCE),
                 position_variance_mm2: position.max(MIN_NOISE_VARIANCE),
                 position_variance_relative_std,
+                position_quantisation,
             },
             force_origin,
             position_origin,

@@ -7,9 +7,11 @@ use serde::Serialize;
 
 use super::adequacy::FitStatus;
 use super::identify::{
-    fit, fit_model, Estimates, Identification, IdentifyError, Inertia, Param, SensorNoise,
+    fit, fit_model, quantisation_shares, Estimates, Identification, IdentifyError, Inertia, Param,
+    SensorNoise,
 };
 use super::log::CalibrationLog;
+use super::quantisation::Quantisation;
 use super::sg::{self, Differentiator};
 
 /// Shortest window tried by [`choose_window`] (s).
@@ -468,13 +470,26 @@ fn fit_inertia_with_noise_uncertainty(
     diff: &Differentiator,
     inertia: Inertia,
 ) -> Result<Identification, IdentifyError> {
+    // A quantised position's kernel shares depend on the window and the log alone: worked
+    // out once for every fit at this window.
+    let with_shares;
+    let noise = match noise.position_quantisation {
+        Some(q) if q.kernel_shares.is_none() => {
+            with_shares = SensorNoise {
+                position_quantisation: Some(Quantisation {
+                    kernel_shares: Some(quantisation_shares(log, noise, diff, q)),
+                    ..q
+                }),
+                ..*noise
+            };
+            &with_shares
+        }
+        _ => noise,
+    };
     let mut id = fit_model(log, noise, diff, inertia)?;
     let rel = noise.position_variance_relative_std;
     if rel > NOISE_UNCERTAINTY_MIN {
-        let raised = SensorNoise {
-            position_variance_mm2: noise.position_variance_mm2 * (1.0 + rel),
-            ..*noise
-        };
+        let raised = noise.position_scaled(1.0 + rel);
         if let Ok(other) = fit_model(log, &raised, diff, inertia) {
             add_noise_uncertainty(&mut id, &other.parameters);
             id.reduced_chi2_noise_change = other.reduced_chi2 - id.reduced_chi2;
