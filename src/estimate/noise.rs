@@ -204,9 +204,10 @@ impl DifferenceNoise {
             .min_by(|a, b| a.variance.total_cmp(&b.variance))?;
         // A quantised signal whose steps outweigh its noise: the error is uniform over a step
         // (variance step^2 / 12) while the signal moves by steps each sample, zero at rest and
-        // a slow sawtooth in between, which the differences count low. What the smoothing
-        // kernels pass on lies between the two; the midpoint is taken, its half-range added to
-        // the relative standard deviation.
+        // a slow sawtooth in between, which the differences count low. The midpoint of the two
+        // is the variance the filter and the reports use, its half-range added to the
+        // relative standard deviation; identification weights its kernels by the step itself
+        // (`position_quantisation`, [`super::quantisation`]).
         // The differences of a quantised ramp count its error up to twice the uniform error's
         // variance (a rod moving half a step a sample steps every other sample, and its
         // second differences are +-q, twice white noise's of variance q^2 / 12): up to
