@@ -15,7 +15,7 @@
 //! redraws of the force noise; in 15.6 um steps at 100 Hz they passed 1.1 to 3.3 times it
 //! (docs/CALIBRATION.md, "A quantised position through the kernels").
 //!
-//! [`kernel_share`] is that share for one kernel, from the speeds the log moves at: the
+//! [`kernel_shares`] is that share for each kernel, from the speeds the log moves at: the
 //! sawtooth's harmonics at each speed, through the block mean identification reduces a fast
 //! log by and the kernel, against white noise of variance q^2 / 12 through the same. Against
 //! the rig's true error it came within 5 to 15 %; against sines read in steps (the speed
@@ -63,17 +63,12 @@ pub const RESPONSE_POINTS: usize = 2048;
 /// speed, held for whole moves, falls into one class and is taken at its own value.
 pub const SPEED_CLASSES: usize = 2048;
 
-/// The share, relative to white noise of the uniform error's variance, of the quantisation
-/// error's power that `weights` (a kernel at the fitted samples' spacing `dt_s`, unit sample
-/// spacing as in [`super::sg::Differentiator`]) pass, averaged over the samples moving at
+/// The shares, relative to white noise of the uniform error's variance, of the quantisation
+/// error's power that each of `kernels` (at the fitted samples' spacing `dt_s`, unit sample
+/// spacing as in [`super::sg::Differentiator`]) passes, averaged over the samples moving at
 /// `speeds_mm_s` (their absolute values are used; zero speeds pass nothing). 1 for an empty
-/// set of speeds or a kernel of no power.
-pub fn kernel_share(weights: &[f64], speeds_mm_s: &[f64], q: Quantisation, dt_s: f64) -> f64 {
-    kernel_shares(&[weights], speeds_mm_s, q, dt_s)[0]
-}
-
-/// [`kernel_share`] of several kernels over the same speeds (the harmonics' frequencies and
-/// the block mean's response are computed once).
+/// set of speeds or a kernel of no power. The harmonics' frequencies and the block mean's
+/// response are computed once for all the kernels.
 pub fn kernel_shares(
     kernels: &[&[f64]],
     speeds_mm_s: &[f64],
@@ -231,16 +226,13 @@ mod tests {
                 for kernel in [sg::VELOCITY, sg::ACCELERATION, sg::POSITION] {
                     let w = &diff.weights[kernel];
                     let h = diff.half;
-                    let model = kernel_share(
-                        w,
+                    let model = kernel_shares(
+                        &[w],
                         &speed[h..speed.len() - h],
                         quantisation,
                         raw_dt * block as f64,
-                    );
+                    )[0];
                     let measured = measured_share(w, &error, quantisation.white_variance_mm2());
-                    eprintln!(
-                        "q {q} a {amplitude} k {kernel} model {model:.4} measured {measured:.4}"
-                    );
                     // Where the speed sweeps through the aliases (the middle sines), the
                     // model sums the harmonics' powers where the sampled sawtooth's
                     // interfere, and overstates what passes by up to half.
