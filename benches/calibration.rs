@@ -53,7 +53,7 @@ fn benches(c: &mut Criterion) {
         let id = identify(&log, &SensorNoise::default()).unwrap();
         let init = EkfInit::from_identification(&id, SensorNoise::default().force_variance_n2);
         let dt = log.dt_s();
-        let (rate, first) = force_rate(&log.force_n, dt, ForceRate::ZeroPhase);
+        let (rate, first) = force_rate(&log.force_n, dt, ForceRate::ZERO_PHASE);
         let (z0, sigma_std) = initial_state(&init, log.position_mm[first], 20.0);
         for (name, discretization) in [
             ("ekf step, rk4 (1 h at 100 Hz)", Discretization::Rk4),
@@ -64,7 +64,7 @@ fn benches(c: &mut Criterion) {
                 &SensorNoise::default(),
                 dt,
                 discretization,
-                ForceRate::ZeroPhase,
+                ForceRate::ZERO_PHASE,
             );
             settings.p0_std[3] = sigma_std;
             group.throughput(Throughput::Elements(rate.len() as u64 - 1));

@@ -562,6 +562,8 @@ fn estimate_and_validate_from_the_command_line() {
         vec!["estimate", "calib.csv", "--r", "0"],
         vec!["estimate", "calib.csv", "--discretization", "midpoint"],
         vec!["estimate", "calib.csv", "--force-rate", "psychic"],
+        vec!["estimate", "calib.csv", "--force-rate", "zero-phase:6s"],
+        vec!["estimate", "calib.csv", "--force-rate", "zero-phase:0s"],
         vec![
             "validate",
             spec.as_str(),

@@ -42,7 +42,7 @@ fn options(noise: Noise, discretization: Discretization) -> EstimateOptions {
     EstimateOptions {
         init: EstimateInit::Identify,
         discretization,
-        force_rate: ForceRate::ZeroPhase,
+        force_rate: ForceRate::ZERO_PHASE,
         noise: SensorNoise::new(noise.force_variance_n2, noise.position_variance_mm2).into(),
         window_s: None,
         outlier_sigmas: None,

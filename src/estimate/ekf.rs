@@ -471,17 +471,68 @@ pub enum ForceRate {
         /// Time constant (s).
         time_constant_s: f64,
     },
-    /// The Savitzky-Golay velocity kernel of identification over the same window: zero phase,
-    /// offline only (it looks half a window ahead).
-    ZeroPhase,
+    /// The Savitzky-Golay velocity kernel of identification over a window of about this
+    /// length: zero phase, offline only (it looks half a window ahead).
+    ZeroPhase {
+        /// Window (s); [`super::sg::WINDOW_SECONDS`] by default ([`ForceRate::ZERO_PHASE`]).
+        window_s: f64,
+    },
+}
+
+impl ForceRate {
+    /// The default force rate: zero phase over identification's default window.
+    pub const ZERO_PHASE: ForceRate = ForceRate::ZeroPhase {
+        window_s: super::sg::WINDOW_SECONDS,
+    };
+
+    /// The zero-phase window tried when the default one loses the motion (s): an eighth of
+    /// the default. A servo's velocity step puts a force step of m a into the log; over 0.4 s
+    /// the kernel spreads it over the whole window, so the rate the filter is driven with
+    /// starts 0.06 s early and peaks at a third of the true one, and a fine encoder then sees
+    /// the predicted motion lag by many standard deviations (encoder draw 29: diverged at
+    /// 60.9 s; over 0.05 s it converges, k2 within 0.8 of its deviation).
+    pub const SHORT_ZERO_PHASE_S: f64 = 0.05;
+
+    /// The longest zero-phase window taken (s): each sample's rate costs a window of work,
+    /// and a force rate smoothed over more than the longest identification window (3.2 s)
+    /// has lost the motion it is there to follow. Longer windows are taken as this.
+    pub const MAX_ZERO_PHASE_S: f64 = 5.0;
+
+    /// A zero-phase force rate over a shorter window than this one at step `dt` (in
+    /// samples), the one of [`ForceRate::SHORT_ZERO_PHASE_S`]; None when this one is
+    /// first-order or already as short.
+    pub fn shorter(self, dt: f64) -> Option<ForceRate> {
+        let short = ForceRate::ZeroPhase {
+            window_s: ForceRate::SHORT_ZERO_PHASE_S,
+        };
+        (short.window_taken_s(dt)? < self.window_taken_s(dt)?).then_some(short)
+    }
+
+    /// The zero-phase window this force rate takes at step `dt` (s): a whole odd number of
+    /// samples, at least [`super::sg::MIN_WINDOW`], at most [`ForceRate::MAX_ZERO_PHASE_S`]
+    /// (None for the first-order filter).
+    pub fn window_taken_s(self, dt: f64) -> Option<f64> {
+        match self {
+            ForceRate::ZeroPhase { window_s } => {
+                Some(zero_phase(window_s, dt).window() as f64 * dt)
+            }
+            ForceRate::FirstOrder { .. } => None,
+        }
+    }
+}
+
+/// The zero-phase differentiator over about `window_s` at sampling step `dt`.
+fn zero_phase(window_s: f64, dt: f64) -> super::sg::Differentiator {
+    let window_s = window_s.min(ForceRate::MAX_ZERO_PHASE_S);
+    super::sg::Differentiator::new(super::sg::window_of(window_s, 1.0 / dt))
 }
 
 /// The force rate of a force signal sampled every `dt`, aligned with the samples
 /// `first .. first + len` of the log (zero-phase drops half a window at each end).
 pub fn force_rate(force_n: &[f64], dt: f64, how: ForceRate) -> (Vec<f64>, usize) {
     match how {
-        ForceRate::ZeroPhase => {
-            let d = super::sg::Differentiator::for_rate(1.0 / dt);
+        ForceRate::ZeroPhase { window_s } => {
+            let d = zero_phase(window_s, dt);
             (d.apply(force_n, dt, super::sg::RATE), d.half)
         }
         ForceRate::FirstOrder { time_constant_s } => {
@@ -605,8 +656,8 @@ enum RateStage {
 impl RateStage {
     fn new(how: ForceRate, dt: f64) -> RateStage {
         match how {
-            ForceRate::ZeroPhase => {
-                let d = super::sg::Differentiator::for_rate(1.0 / dt);
+            ForceRate::ZeroPhase { window_s } => {
+                let d = zero_phase(window_s, dt);
                 RateStage::ZeroPhase {
                     weights: d.weights[super::sg::RATE].clone(),
                     scale: 1.0 / dt,
@@ -1021,11 +1072,9 @@ pub fn default_settings(
     how: ForceRate,
 ) -> EkfSettings {
     let rate_variance = match how {
-        ForceRate::ZeroPhase => super::sg::Differentiator::for_rate(1.0 / dt).noise_variance(
-            super::sg::RATE,
-            noise.force_variance_n2,
-            dt,
-        ),
+        ForceRate::ZeroPhase { window_s } => {
+            zero_phase(window_s, dt).noise_variance(super::sg::RATE, noise.force_variance_n2, dt)
+        }
         ForceRate::FirstOrder { time_constant_s } => {
             // Discrete first-order filter: var(u) = var(F) (2 - a)^-1 a ... approximately var(F) / (2 tau dt).
             noise.force_variance_n2 / (2.0 * time_constant_s.max(dt) * dt)
@@ -1106,7 +1155,7 @@ mod tests {
         let samples = signal(1000);
         let force: Vec<f64> = samples.iter().map(|s| s.force_n).collect();
         for how in [
-            ForceRate::ZeroPhase,
+            ForceRate::ZERO_PHASE,
             ForceRate::FirstOrder {
                 time_constant_s: 0.05,
             },
@@ -1152,7 +1201,7 @@ mod tests {
                 &crate::estimate::identify::SensorNoise::new(1e-3, 1e-4),
                 dt,
                 Discretization::Rk4,
-                ForceRate::ZeroPhase,
+                ForceRate::ZERO_PHASE,
             )
         };
         settings.m_floor = 0.0;
@@ -1196,7 +1245,7 @@ mod tests {
             &noise,
             0.01,
             Discretization::Rk4,
-            ForceRate::ZeroPhase,
+            ForceRate::ZERO_PHASE,
         );
         let start = Start::Init {
             init,
@@ -1207,7 +1256,7 @@ mod tests {
             let r = Filter::new(
                 n,
                 0.01,
-                ForceRate::ZeroPhase,
+                ForceRate::ZERO_PHASE,
                 start,
                 settings,
                 [0.0, 0.0],
@@ -1215,5 +1264,43 @@ mod tests {
             );
             assert_eq!(r.is_ok(), ok, "{n} samples");
         }
+    }
+
+    #[test]
+    fn the_short_force_rate_follows_a_ramp_the_default_one_smears() {
+        // A force at rest that starts to rise at 5 N/s at t = 1 s, at 500 Hz: its rate is 0
+        // before and exactly 5 N/s after. A quintic kernel whose whole window lies on the ramp
+        // gives the slope exactly; 30 ms after the start the short window (25 samples) lies on
+        // it and the default one (201 samples) still reaches back into the rest.
+        let dt = 0.002;
+        let force: Vec<f64> = (0..2000)
+            .map(|i| 5.0 * (i as f64 * dt - 1.0).max(0.0))
+            .collect();
+        let short = ForceRate::ZERO_PHASE.shorter(dt).unwrap();
+        assert_eq!(short.window_taken_s(dt), Some(0.05));
+        let at = 515; // 1.030 s
+        let (rate, first) = force_rate(&force, dt, short);
+        assert!(
+            (rate[at - first] - 5.0).abs() < 1e-9,
+            "{}",
+            rate[at - first]
+        );
+        let (rate, first) = force_rate(&force, dt, ForceRate::ZERO_PHASE);
+        assert!((rate[at - first] - 5.0).abs() > 0.5, "{}", rate[at - first]);
+        // Where the short window is no shorter than the default one, there is none; nor for
+        // the first-order filter.
+        assert!(ForceRate::ZERO_PHASE.shorter(0.05).is_none());
+        assert!(ForceRate::FirstOrder {
+            time_constant_s: 0.02
+        }
+        .shorter(dt)
+        .is_none());
+        // At 100 Hz the short window is the shortest kernel, 13 samples.
+        assert_eq!(
+            ForceRate::ZERO_PHASE
+                .shorter(0.01)
+                .and_then(|r| r.window_taken_s(0.01)),
+            Some(0.13)
+        );
     }
 }

@@ -136,7 +136,7 @@ impl EstimateOptions {
         EstimateOptions {
             init: EstimateInit::Identify,
             discretization: ekf::Discretization::Rk4,
-            force_rate: ekf::ForceRate::ZeroPhase,
+            force_rate: ekf::ForceRate::ZERO_PHASE,
             noise: noise.into(),
             window_s: None,
             outlier_sigmas: None,
@@ -1076,21 +1076,25 @@ where
                 .clamp(sg::MIN_WINDOW as f64, 1e7) as usize)
                 | 1
         });
-    let mut settings =
-        ekf::default_settings(&init, noise, dt, opts.discretization, opts.force_rate);
-    settings.m_floor = settings.m_floor.max(m_floor);
-    if let Some(k) = opts.outlier_sigmas {
-        settings.outlier_sigmas = k;
-    }
-    for &(s, v) in &opts.q {
-        settings.q[s.index()] = v;
-    }
-    for &(s, v) in &opts.p0_std {
-        settings.p0_std[s.index()] = v;
-    }
-    if let Some(r) = opts.r_position_mm2 {
-        settings.r_position_mm2 = r.max(1e-12);
-    }
+    // The filter's settings for a force rate: the defaults, then the user's overrides.
+    let settings_for = |force_rate: ekf::ForceRate| {
+        let mut settings = ekf::default_settings(&init, noise, dt, opts.discretization, force_rate);
+        settings.m_floor = settings.m_floor.max(m_floor);
+        if let Some(k) = opts.outlier_sigmas {
+            settings.outlier_sigmas = k;
+        }
+        for &(s, v) in &opts.q {
+            settings.q[s.index()] = v;
+        }
+        for &(s, v) in &opts.p0_std {
+            settings.p0_std[s.index()] = v;
+        }
+        if let Some(r) = opts.r_position_mm2 {
+            settings.r_position_mm2 = r.max(1e-12);
+        }
+        settings
+    };
+    let settings = settings_for(opts.force_rate);
     let start = ekf::Start::Init {
         init,
         stroke_mm: stroke,
@@ -1112,14 +1116,15 @@ where
     });
     let mut progress = progress;
     // One run of the filter over the whole log, rows to the sink.
-    let mut run_once = |settings: EkfSettings,
+    let mut run_once = |force_rate: ekf::ForceRate,
+                        settings: EkfSettings,
                         start: ekf::Start,
                         sink: &mut dyn RowSink|
      -> Result<(EkfRun, EkfSettings, Option<f64>), EstimateError> {
         let mut filter = ekf::Filter::new(
             survey.samples,
             dt,
-            opts.force_rate,
+            force_rate,
             start,
             settings,
             [init.f0_n, init.d0_n],
@@ -1161,7 +1166,8 @@ where
         Ok((run, settings, path.mean_square_z()))
     };
     let mut recovery = None;
-    let (run, settings, stiffness_path) = match run_once(settings, start, sink) {
+    let mut force_rate = opts.force_rate;
+    let (run, settings, stiffness_path) = match run_once(force_rate, settings, start, sink) {
         Ok(done) => done,
         Err(EstimateError::Filter(EkfError::Diverged { sample, t_s, what })) => {
             // A poor start. First widen what the filter may learn (ten times the initial
@@ -1204,33 +1210,56 @@ where
                 },
                 stroke_mm: stroke,
             };
+            // Before the loose filter, a force rate over a shorter window (when the default
+            // zero-phase one was used), with the process noise its own noise calls for: a
+            // step in the force (a servo's velocity step times the inertia) is then not spread
+            // over 0.4 s, which drives the predicted motion a fraction of the true
+            // acceleration and loses a fine encoder's motion by many standard deviations.
+            let short = opts.force_rate.shorter(dt).map(|rate| {
+                let how = format!(
+                    "the force rate over {:.3} s instead of {:.3} s (a force step, the inertia \
+                     times a velocity step or friction's at a reversal, is then not spread over \
+                     the whole window)",
+                    rate.window_taken_s(dt).unwrap_or(0.0),
+                    opts.force_rate.window_taken_s(dt).unwrap_or(0.0),
+                );
+                (rate, settings_for(rate), start, how)
+            });
             let attempts = [
-                (
+                Some((
+                    opts.force_rate,
                     wide,
                     start,
                     "ten times the initial standard deviations of sigma, D, M, k2 and d2 and ten \
-                     times the process noise of the acceleration",
-                ),
-                (
+                     times the process noise of the acceleration"
+                        .to_string(),
+                )),
+                Some((
+                    opts.force_rate,
                     narrow,
                     start,
                     "a tenth of the initial standard deviations of M and d2 (held close to \
-                     identification's values)",
-                ),
-                (
+                     identification's values)"
+                        .to_string(),
+                )),
+                short,
+                Some((
+                    opts.force_rate,
                     loose,
                     loose_start,
                     "the encoder's variance taken ten times larger and d2 held at zero (the \
                      filter follows the log loosely, and its standard deviations are not to be \
-                     trusted)",
-                ),
+                     trusted)"
+                        .to_string(),
+                )),
             ];
             let mut failures = Vec::new();
             let mut done = None;
-            for (attempt, attempt_start, how) in attempts {
+            for (rate, attempt, attempt_start, how) in attempts.into_iter().flatten() {
                 sink.restart();
-                match run_once(attempt, attempt_start, sink) {
+                match run_once(rate, attempt, attempt_start, sink) {
                     Ok(d) => {
+                        force_rate = rate;
                         recovery = Some(format!(
                             "the filter diverged at sample {sample} (t = {t_s:.3} s: {what}); {}it \
                              was run again from the start with {how}, and converged",
@@ -1279,7 +1308,7 @@ where
                     .min((opts.identify_span_s / dt).ceil().clamp(3.0, 1e15) as usize),
                 log_s: survey.samples as f64 * dt,
                 dt,
-                force_rate: opts.force_rate,
+                force_rate,
                 settings,
                 init,
                 identification: id,

@@ -32,7 +32,12 @@ pub const ORDER_DERIVATIVES: usize = 5;
 /// An odd window length of about [`WINDOW_SECONDS`] at `rate_hz`, at least [`MIN_WINDOW`]
 /// samples.
 pub fn window_for_rate(rate_hz: f64) -> usize {
-    let n = (WINDOW_SECONDS * rate_hz).round().clamp(0.0, 1e6) as usize;
+    window_of(WINDOW_SECONDS, rate_hz)
+}
+
+/// An odd window length of about `seconds` at `rate_hz`, at least [`MIN_WINDOW`] samples.
+pub fn window_of(seconds: f64, rate_hz: f64) -> usize {
+    let n = (seconds * rate_hz).round().clamp(0.0, 1e6) as usize;
     (n | 1).max(MIN_WINDOW)
 }
 

@@ -500,7 +500,7 @@ pub struct FilterArgs {
     /// Prediction method.
     #[arg(long, value_enum, default_value_t = DiscretizationArg::Rk4)]
     pub discretization: DiscretizationArg,
-    /// Force-rate input: zero-phase (offline) or first-order[:TIME] (the paper's filter; TIME defaults to 0.02s).
+    /// Force-rate input: zero-phase[:TIME] (offline; TIME defaults to 0.4s) or first-order[:TIME] (the paper's filter; TIME defaults to 0.02s).
     #[arg(long, default_value = "zero-phase", value_parser = force_rate)]
     pub force_rate: ForceRate,
     /// Process noise density of a state, e.g. --q xdd=0.5 --q sigma=1e-3 (repeatable;
@@ -628,7 +628,14 @@ fn init_source(text: &str) -> Result<InitSource, String> {
 
 fn force_rate(text: &str) -> Result<ForceRate, String> {
     match text.split_once(':') {
-        None if text == "zero-phase" => Ok(ForceRate::ZeroPhase),
+        None if text == "zero-phase" => Ok(ForceRate::ZERO_PHASE),
+        Some(("zero-phase", t)) => match parse_duration_s(t)? {
+            w if w <= ForceRate::MAX_ZERO_PHASE_S => Ok(ForceRate::ZeroPhase { window_s: w }),
+            w => Err(format!(
+                "\"{t}\": a zero-phase window of {w} s; expected at most {} s",
+                ForceRate::MAX_ZERO_PHASE_S
+            )),
+        },
         None if text == "first-order" => Ok(ForceRate::FirstOrder {
             time_constant_s: 0.02,
         }),
@@ -636,7 +643,7 @@ fn force_rate(text: &str) -> Result<ForceRate, String> {
             time_constant_s: parse_duration_s(t)?,
         }),
         _ => Err(format!(
-            "\"{text}\": expected zero-phase or first-order[:TIME]"
+            "\"{text}\": expected zero-phase[:TIME] or first-order[:TIME]"
         )),
     }
 }
