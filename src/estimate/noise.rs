@@ -163,6 +163,10 @@ pub struct DifferenceEstimate {
     /// variance then lies between the differences' estimate and step^2 / 12, see
     /// [`DifferenceNoise`]).
     pub quantum: Option<f64>,
+    /// The standard deviation, in steps, of the analog noise a quantised signal carries
+    /// before it is read in steps ([`dither_steps`]); 0 for a noiseless quantiser or a signal
+    /// that is not quantised.
+    pub dither_steps: f64,
 }
 
 impl DifferenceNoise {
@@ -213,7 +217,29 @@ impl DifferenceNoise {
         // second differences are +-q, twice white noise's of variance q^2 / 12): up to
         // [`QUANTISED_MAX_RATIO`] of it, the steps still make the noise, and the step is
         // reported with the differences' estimate.
-        match lattice_step(&self.steps) {
+        // A quantised signal with analog noise of its own before the steps (an ADC reading
+        // an LVDT): its error is that noise plus the steps' error, of variance
+        // step^2 / 12 + sigma^2, and the noise turns the steps' sawtooth into white noise
+        // ([`super::quantisation`]). The differences' estimate then counts it low (at
+        // sigma = 0.2 steps, 0.6 of it on the independent rig's 15.6 um encoder): the
+        // variance is taken from sigma, read from how much more the readings move than the
+        // motion ([`dither_steps`]).
+        let lattice = lattice_step(&self.steps)
+            .filter(|&step| white.variance <= QUANTISED_MAX_RATIO * step * step / 12.0);
+        let dither = lattice.map_or(0.0, |step| dither_steps(&self.steps, step));
+        match lattice {
+            Some(step) if dither >= DITHER_MIN_STEPS => {
+                let total = step * step * (1.0 / 12.0 + dither * dither);
+                // The variance's share that sigma carries, known to DITHER_RELATIVE_STD.
+                let spread = 2.0 * DITHER_RELATIVE_STD * dither * dither * step * step / total;
+                Some(DifferenceEstimate {
+                    variance: total,
+                    relative_std: white.relative_std.hypot(spread),
+                    quantum: Some(step),
+                    dither_steps: dither,
+                    ..white
+                })
+            }
             Some(step) if step * step / 12.0 > white.variance => {
                 let uniform = step * step / 12.0;
                 let spread = (uniform - white.variance) / (uniform + white.variance);
@@ -247,6 +273,86 @@ impl DifferenceNoise {
 /// ([`DifferenceNoise::estimate`]). Beyond it the signal carries noise of its own of more
 /// than about a third of a step, which dithers the steps into white noise.
 pub const QUANTISED_MAX_RATIO: f64 = 2.0;
+
+/// The least analog noise before the steps (standard deviation, in steps) taken as such
+/// ([`dither_steps`]): below it the steps' sawtooth keeps nine tenths of its first harmonic's
+/// power, and noiseless encoders read 0 to 0.03 on the independent rig's sweep.
+pub const DITHER_MIN_STEPS: f64 = 0.05;
+
+/// How well [`dither_steps`] reads the analog noise before the steps, relative: on the
+/// independent rig's encoder draws with 0.2 and 0.33 steps of noise it read 0.19 to 0.22 and
+/// 0.32 to 0.33.
+pub const DITHER_RELATIVE_STD: f64 = 0.1;
+
+/// The samples over which [`dither_steps`] smooths the readings into the motion (a quintic
+/// Savitzky-Golay smoother).
+pub const DITHER_SMOOTHING_SAMPLES: usize = 33;
+
+/// The standard deviation, in steps, of the analog noise a signal read in steps of `step`
+/// carries before it is read, from its first differences `steps`.
+///
+/// A reading y = Q(x + n) of a position x with noise n of standard deviation s steps moves,
+/// from one sample to the next, by |Delta y| whose mean over the reading's phase in a step is
+/// exactly E|a + d| (the mean of a folded normal), where a is the motion's own move in steps
+/// and d ~ N(0, 2 s^2): a noiseless encoder moves by the motion's steps only, a noisy one
+/// flickers across the step it rests near. With a from the readings smoothed over
+/// [`DITHER_SMOOTHING_SAMPLES`], s is the noise for which the model's total move matches the
+/// readings' (0 where the readings move no more than the motion).
+pub fn dither_steps(steps: &[f32], step: f64) -> f64 {
+    let half = DITHER_SMOOTHING_SAMPLES / 2;
+    if steps.len() < DITHER_SMOOTHING_SAMPLES + 2 || step.is_nan() || step <= 0.0 {
+        return 0.0;
+    }
+    // The readings in steps, from the first one.
+    let mut y = Vec::with_capacity(steps.len() + 1);
+    y.push(0.0);
+    let mut at = 0.0;
+    for d in steps {
+        at += f64::from(*d) / step;
+        y.push(at);
+    }
+    let weights = super::sg::quintic_smoother(half);
+    let smooth: Vec<f64> = y
+        .windows(weights.len())
+        .map(|w| w.iter().zip(&weights).map(|(a, b)| a * b).sum())
+        .collect();
+    // The motion's move between smoothed samples j and j + 1 (readings half + j and
+    // half + j + 1) and the readings' own move there.
+    let moves: Vec<(f64, f64)> = smooth
+        .windows(2)
+        .enumerate()
+        .map(|(j, w)| ((w[1] - w[0]).abs(), (y[half + j + 1] - y[half + j]).abs()))
+        .collect();
+    let observed: f64 = moves.iter().map(|m| m.1).sum();
+    let expected = |s: f64| -> f64 {
+        let sd = std::f64::consts::SQRT_2 * s;
+        moves
+            .iter()
+            .map(|&(a, _)| {
+                if sd <= 0.0 {
+                    a
+                } else {
+                    a * statrs::function::erf::erf(a / (sd * std::f64::consts::SQRT_2))
+                        + sd * (2.0 / std::f64::consts::PI).sqrt()
+                            * (-a * a / (2.0 * sd * sd)).exp()
+                }
+            })
+            .sum::<f64>()
+            - observed
+    };
+    let top = 2.0;
+    if expected(0.0) >= 0.0 {
+        return 0.0;
+    }
+    if expected(top) <= 0.0 {
+        return top;
+    }
+    let mut convergency = roots::SimpleConvergency {
+        eps: 1e-4,
+        max_iter: 60,
+    };
+    roots::find_root_brent(0.0, top, expected, &mut convergency).unwrap_or(0.0)
+}
 
 /// How well identification's model of a quantised position's error through its kernels
 /// ([`super::quantisation`]) knows the error's power, relative: the model against the true
@@ -339,6 +445,7 @@ fn order_estimate(d: &[f32], k: usize) -> Option<DifferenceEstimate> {
         order: k,
         differences: kept,
         quantum: None,
+        dither_steps: 0.0,
     })
 }
 
@@ -507,6 +614,7 @@ impl GivenNoise {
         let position_quantisation = match (position_origin, log) {
             (NoiseOrigin::Log, Some(l)) => l.position.quantum.map(|step| Quantisation {
                 step_mm: step,
+                dither_steps: l.position.dither_steps,
                 block: 1,
                 variance_scale: 1.0,
                 kernel_shares: None,
@@ -631,6 +739,65 @@ mod tests {
     }
 
     #[test]
+    fn the_noise_before_an_encoders_steps_is_read_from_how_much_more_the_readings_move() {
+        // A 5 um encoder at 200 Hz on 4 mm sweeps of half a cosine, 5 s each, with rests of
+        // 3 s between them, read with analog noise of 0, 0.1, 0.2 and 0.3 steps before the
+        // steps: the noise is read within 15 % (none for the noiseless encoder), and the
+        // variance is the steps' and the noise's within 15 %.
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, Normal};
+        let step = 0.005;
+        for (seed, dither) in [(1, 0.0), (2, 0.1), (3, 0.2), (4, 0.3)] {
+            let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+            let noise = Normal::new(0.0, dither * step + 1e-300).unwrap();
+            let y: Vec<f64> = (0..60_000)
+                .map(|i| {
+                    let t = i as f64 * 0.005;
+                    // Out over 5 s, a rest of 3 s, back over 5 s, a rest of 3 s.
+                    let cycle = t % 16.0;
+                    let phase = (cycle.min(5.0) + (cycle - 8.0).clamp(0.0, 5.0)) / 5.0
+                        * std::f64::consts::PI;
+                    // Each sweep a little longer: the rests fall at every phase of a step.
+                    let x = 3.0 + (2.0 + 0.0037 * (t / 16.0).floor()) * phase.cos();
+                    let n = if dither > 0.0 {
+                        noise.sample(&mut rng)
+                    } else {
+                        0.0
+                    };
+                    ((x + n) / step).round() * step
+                })
+                .collect();
+            let e = DifferenceNoise::of(&y).unwrap();
+            // At 0.3 steps the differences exceed twice the steps' variance: the noise is
+            // then taken as white, from the differences alone.
+            if dither < 0.3 {
+                assert_eq!(
+                    e.quantum.map(|q| (q / step - 1.0).abs() < 1e-6),
+                    Some(true),
+                    "dither {dither}: {e:?}"
+                );
+            }
+            if dither == 0.0 {
+                assert_eq!(e.dither_steps, 0.0);
+            } else {
+                if e.quantum.is_some() {
+                    assert!(
+                        (e.dither_steps / dither - 1.0).abs() < 0.15,
+                        "dither {} against {dither}",
+                        e.dither_steps
+                    );
+                }
+                let total = step * step * (1.0 / 12.0 + dither * dither);
+                assert!(
+                    (e.variance / total - 1.0).abs() < 0.15,
+                    "variance {} against {total}",
+                    e.variance
+                );
+            }
+        }
+    }
+
+    #[test]
     fn an_unchanging_quantised_signal_gives_zero_and_the_resolution_floors_it() {
         let e = DifferenceNoise::of(&[2.5; 200]).unwrap();
         assert_eq!(e.variance, 0.0);
@@ -651,6 +818,7 @@ mod tests {
             order: 3,
             differences: 30_000,
             quantum: None,
+            dither_steps: 0.0,
         };
         let log = LogNoise {
             force: DifferenceEstimate {

@@ -28,6 +28,8 @@ use std::f64::consts::PI;
 pub struct Quantisation {
     /// The step (mm).
     pub step_mm: f64,
+    /// The standard deviation, in steps, of analog noise before the steps (0: none).
+    pub dither_steps: f64,
     /// The logged samples averaged into each sample identification fits (1 unless reduced).
     pub block: usize,
     /// A factor on the error's variance: 1, or raised to carry the model's uncertainty
@@ -113,13 +115,26 @@ pub fn kernel_shares(
         })
         .collect();
     let raw_dt = dt_s / b;
-    let tail = 1.0 - 6.0 / (PI * PI) * (1..=HARMONICS).map(|n| 1.0 / (n * n) as f64).sum::<f64>();
+    // Analog noise of s steps before the steps leaves harmonic n of the sawtooth (its mean
+    // over the noise) exp(-2 pi^2 n^2 s^2) of its amplitude; the power it loses, the
+    // harmonics beyond the last summed, and the noise's own s^2 steps^2 are white.
+    let dither = q.dither_steps.max(0.0);
+    let kept: Vec<f64> = (1..=HARMONICS)
+        .map(|n| (-4.0 * PI * PI * (n * n) as f64 * dither * dither).exp())
+        .collect();
+    let tail = 1.0
+        - 6.0 / (PI * PI)
+            * (1..=HARMONICS)
+                .zip(&kept)
+                .map(|(n, k)| k / (n * n) as f64)
+                .sum::<f64>()
+        + 12.0 * dither * dither;
     // Each kernel's passed power over the white reference (power / b: white noise of the
     // logged samples' variance through the block mean and the kernel), at one speed.
     let shares_at = |v: f64, out: &mut [f64]| {
         let cycles = v / q.step_mm * raw_dt;
         out.iter_mut().for_each(|o| *o = 0.0);
-        for n in 1..=HARMONICS {
+        for (n, kept) in (1..=HARMONICS).zip(&kept) {
             let n = n as f64;
             // The harmonic at the logged samples' frequency, folded into [0, 2 pi).
             let w = (2.0 * PI * n * cycles).rem_euclid(2.0 * PI);
@@ -135,7 +150,7 @@ pub fn kernel_shares(
             let x = k / step;
             let i = (x.floor() as usize).min(RESPONSE_POINTS - 2);
             let f = x - i as f64;
-            let weight = 6.0 / (PI * PI * n * n) * box2;
+            let weight = 6.0 / (PI * PI * n * n) * box2 * kept;
             for (o, r) in out.iter_mut().zip(&responses) {
                 *o += weight * (r[i] * (1.0 - f) + r[i + 1] * f);
             }
@@ -217,6 +232,7 @@ mod tests {
         for (q, raw_dt, block) in [(0.002, 0.001, 10), (0.007, 0.005, 2)] {
             let quantisation = Quantisation {
                 step_mm: q,
+                dither_steps: 0.0,
                 block,
                 variance_scale: 1.0,
                 kernel_shares: None,
@@ -243,6 +259,49 @@ mod tests {
                     );
                 }
             }
+        }
+    }
+
+    #[test]
+    fn noise_before_the_steps_whitens_the_sawtooth_as_modelled() {
+        // A rod creeping at 0.3 steps a sample (a 5 um step at 200 Hz) read with analog noise
+        // of 0.2 steps before the steps: the sawtooth's harmonics lie inside the kernels'
+        // band, so a noiseless quantiser's error passes many times white noise's share, and
+        // the noise leaves its first harmonic a fifth of its power.
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, Normal};
+        let (q, dt, speed) = (0.005, 0.005, 0.3 * 0.005 / 0.005);
+        let diff = Differentiator::new(43);
+        let mut rng = rand::rngs::StdRng::seed_from_u64(3);
+        let noise = Normal::new(0.0, 0.2 * q).unwrap();
+        let error: Vec<f64> = (0..400_000)
+            .map(|i| {
+                let x = 1.0 + speed * i as f64 * dt;
+                ((x + noise.sample(&mut rng)) / q).round() * q - x
+            })
+            .collect();
+        let speeds = vec![speed; 1000];
+        let with = |dither_steps: f64| Quantisation {
+            step_mm: q,
+            dither_steps,
+            block: 1,
+            variance_scale: 1.0,
+            kernel_shares: None,
+        };
+        for kernel in [sg::POSITION, sg::VELOCITY, sg::ACCELERATION] {
+            let w = &diff.weights[kernel];
+            let measured = measured_share(w, &error, with(0.0).white_variance_mm2());
+            let model = kernel_shares(&[w], &speeds, with(0.2), dt)[0];
+            let noiseless = kernel_shares(&[w], &speeds, with(0.0), dt)[0];
+            assert!(
+                (model / measured).ln().abs() <= 1.15_f64.ln(),
+                "kernel {kernel}: model {model}, measured {measured}"
+            );
+            // The noiseless model is far off: the test can tell the two apart.
+            assert!(
+                (noiseless / measured).ln().abs() >= 2.0_f64.ln(),
+                "kernel {kernel}: noiseless model {noiseless}, measured {measured}"
+            );
         }
     }
 }

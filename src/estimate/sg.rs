@@ -54,6 +54,15 @@ pub const MIN_WINDOW: usize = 13;
 /// conditioned for any window length (in raw offsets its entries would span up to 10 powers of
 /// the half width). Needs at least `order + 1` distinct offsets within `half`, which
 /// [`MIN_WINDOW`] guarantees for every kernel of [`Differentiator`].
+/// The quintic smoother over every sample of a window of `2 half + 1` (the value at offset 0
+/// of the least-squares quintic), for a signal's motion where every sample's noise is to be
+/// averaged (identification's [`POSITION`] kernel takes the odd offsets only).
+pub fn quintic_smoother(half: usize) -> Vec<f64> {
+    let h = half.max(MIN_WINDOW / 2) as i64;
+    let all: Vec<i64> = (-h..=h).collect();
+    kernel(h as usize, &all, ORDER, 0)
+}
+
 fn kernel(half: usize, offsets: &[i64], order: usize, deriv: usize) -> Vec<f64> {
     let scale = half.max(1) as f64;
     let a = DMatrix::from_fn(offsets.len(), order + 1, |i, j| {

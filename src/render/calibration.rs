@@ -207,6 +207,9 @@ pub fn sensor_noise_json(noise: &ResolvedNoise) -> Value {
         "log_position_variance_relative_std": noise.log.map(|l| l.position.relative_std),
         "position_variance_relative_std": noise.noise.position_variance_relative_std,
         "position_quantum_mm": noise.log.and_then(|l| l.position.quantum),
+        "position_dither_mm": noise.log.and_then(|l| {
+            l.position.quantum.map(|q| q * l.position.dither_steps)
+        }),
         "force_quantum_n": noise.log.and_then(|l| l.force.quantum),
         "warnings": noise.warnings,
     })
@@ -230,12 +233,24 @@ pub fn format_sensor_noise(noise: &ResolvedNoise) -> String {
         noise.position_origin,
         noise.log.and_then(|l| l.position.quantum),
     ) {
-        s.push_str(&format!(
-            "  the encoder reads in steps of {q:.4e} mm, larger than its noise: its error is not \
-             white (constant at rest), so the position variance is known only to +-{:.0} %, \
-             which the standard deviations carry\n",
-            100.0 * noise.noise.position_variance_relative_std
-        ));
+        let dither = noise.log.map_or(0.0, |l| l.position.dither_steps);
+        if dither > 0.0 {
+            s.push_str(&format!(
+                "  the position is read in steps of {q:.4e} mm with noise of {:.2e} mm ({dither:.2} \
+                 steps) before them: its error is that noise and the steps', partly white, so \
+                 the position variance is known only to +-{:.0} %, which the standard deviations \
+                 carry\n",
+                q * dither,
+                100.0 * noise.noise.position_variance_relative_std
+            ));
+        } else {
+            s.push_str(&format!(
+                "  the encoder reads in steps of {q:.4e} mm, larger than its noise: its error is \
+                 not white (constant at rest), so the position variance is known only to \
+                 +-{:.0} %, which the standard deviations carry\n",
+                100.0 * noise.noise.position_variance_relative_std
+            ));
+        }
     }
     s
 }

@@ -6,11 +6,13 @@ a quarter to four times the paper's; 300 s logs through the real binary's identi
 and validate (the true law, and one with k2 5 % high, at --tolerance 3%). Prints one line per
 draw; a draw the rig cannot run (no speed keeps the damper force rising) says so.
 
-    .venv/bin/python tests/interop/rig_sweep.py [--encoder] FIRST LAST
+    .venv/bin/python tests/interop/rig_sweep.py [--encoder [--dither FRACTION]] FIRST LAST
 
 With --encoder the same transmissions, profiles and rates are read by a digital encoder: no
 analog position noise, steps of 1 to 20 um (log-uniform, seeded by the draw's number apart
-from the rest), the force noise as drawn. FIRST and LAST are draw numbers (each draw is seeded by its number, so a line can be
+from the rest), the force noise as drawn. With --dither the position carries analog noise of
+FRACTION steps' standard deviation before it is read in steps (an ADC reading an LVDT or a
+potentiometer: its steps with the sensor's noise across a few of them). FIRST and LAST are draw numbers (each draw is seeded by its number, so a line can be
 reproduced alone). CAMSPRING_BIN names the binary (default target/release/camspring).
 """
 import json
@@ -46,21 +48,23 @@ def draw(i):
     return tr, PROFILES[i % len(PROFILES)], rig, scale
 
 
-def encoder_draw(i):
+def encoder_draw(i, dither=0.0):
     """Draw `i` read by a digital encoder: the transmission, profile, rate and force noise of
-    [`draw`], the position quantised in steps of 1 to 20 um with no other noise. The last
-    element is the step in um."""
+    [`draw`], the position quantised in steps of 1 to 20 um with analog noise of `dither`
+    steps' standard deviation before it (none by default). The last element is the step in
+    um."""
     tr, profile, rig, _ = draw(i)
     r = np.random.default_rng(5000 + i)
     step_mm = float(math.exp(r.uniform(math.log(0.001), math.log(0.02))))
-    rig = Rig(rate_hz=rig.rate_hz, force_variance=rig.force_variance, position_variance=0.0,
-              encoder_step_mm=step_mm, seed=i)
+    rig = Rig(rate_hz=rig.rate_hz, force_variance=rig.force_variance,
+              position_variance=(dither * step_mm) ** 2, encoder_step_mm=step_mm, seed=i)
     return tr, profile, rig, step_mm * 1000.0
 
 
-def case(i, seconds=300.0, encoder=False):
-    tr, profile, rig, scale = (encoder_draw if encoder else draw)(i)
-    sensor = f"encoder {scale:.1f} um" if encoder else f"noise x{scale:.2f}"
+def case(i, seconds=300.0, encoder=False, dither=0.0):
+    tr, profile, rig, scale = encoder_draw(i, dither) if encoder else draw(i)
+    sensor = (f"encoder {scale:.1f} um{f' dither {dither:.2f}' if dither else ''}" if encoder
+              else f"noise x{scale:.2f}")
     tag = (f"#{i:3d} {profile:9s} m {tr.m:.3f} d0 {tr.d0:.2f} d1 {tr.d1:.2f} d2 {tr.d2:.4f} "
            f"k2 {tr.k2:.3f} {rig.rate_hz:.0f} Hz {sensor}")
     with tempfile.TemporaryDirectory() as d:
@@ -101,9 +105,14 @@ def case(i, seconds=300.0, encoder=False):
 def main():
     args = sys.argv[1:]
     encoder = "--encoder" in args
+    dither = 0.0
+    if "--dither" in args:
+        at = args.index("--dither")
+        dither = float(args[at + 1])
+        del args[at:at + 2]
     first, last = (int(a) for a in args if a != "--encoder")
     with Pool(2) as pool:
-        for line in pool.imap(partial(case, encoder=encoder), range(first, last)):
+        for line in pool.imap(partial(case, encoder=encoder, dither=dither), range(first, last)):
             print(line, flush=True)
 
 
