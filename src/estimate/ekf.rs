@@ -490,7 +490,7 @@ impl ForceRate {
     /// the kernel spreads it over the whole window, so the rate the filter is driven with
     /// starts 0.06 s early and peaks at a third of the true one, and a fine encoder then sees
     /// the predicted motion lag by many standard deviations (encoder draw 29: diverged at
-    /// 60.9 s; over 0.05 s it converges, k2 within 0.8 of its deviation).
+    /// 60.9 s; over 0.05 s it converges, k2 within 0.9 of its deviation).
     pub const SHORT_ZERO_PHASE_S: f64 = 0.05;
 
     /// The longest zero-phase window taken (s): each sample's rate costs a window of work,
