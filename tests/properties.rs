@@ -278,3 +278,43 @@ proptest! {
         }
     }
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+
+    /// Any signal read in steps, moving or at rest, with or without noise before the steps,
+    /// gives a noise before the steps that is finite, between 0 and 2 steps, and a noise
+    /// estimate whose variance is finite and not negative: never a panic.
+    #[test]
+    fn the_noise_before_an_encoders_steps_is_always_a_finite_share_of_a_step(
+        step in 1e-4f64..0.05,
+        speed in prop::collection::vec(-3.0f64..3.0, 1..8),
+        noise in 0.0f64..1.5,
+        seed in 0u64..1000,
+        samples in 0usize..3000,
+    ) {
+        use camspring::estimate::noise::{dither_steps, DifferenceNoise};
+        let mut state = seed.wrapping_mul(6364136223846793005).wrapping_add(1);
+        let mut uniform = move || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        // Piecewise-constant speeds (steps a sample), noise uniform of the given share of a
+        // step on each side, read in steps.
+        let mut x = 1.0;
+        let y: Vec<f64> = (0..samples)
+            .map(|i| {
+                x += speed[i * speed.len() / samples.max(1)] * step;
+                let n = (uniform() - 0.5) * 2.0 * noise * step;
+                ((x + n) / step).round() * step
+            })
+            .collect();
+        let differences: Vec<f32> = y.windows(2).map(|w| (w[1] - w[0]) as f32).collect();
+        let s = dither_steps(&differences, step);
+        prop_assert!(s.is_finite() && (0.0..=2.0).contains(&s), "{s}");
+        if let Some(e) = DifferenceNoise::of(&y) {
+            prop_assert!(e.variance.is_finite() && e.variance >= 0.0, "{e:?}");
+            prop_assert!(e.dither_steps.is_finite() && e.dither_steps >= 0.0, "{e:?}");
+        }
+    }
+}
