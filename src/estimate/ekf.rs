@@ -513,9 +513,7 @@ impl ForceRate {
     /// (None for the first-order filter).
     pub fn window_taken_s(self, dt: f64) -> Option<f64> {
         match self {
-            ForceRate::ZeroPhase { window_s } => {
-                Some(zero_phase(window_s, dt).window() as f64 * dt)
-            }
+            ForceRate::ZeroPhase { window_s } => Some(zero_phase_samples(window_s, dt) as f64 * dt),
             ForceRate::FirstOrder { .. } => None,
         }
     }
@@ -523,8 +521,13 @@ impl ForceRate {
 
 /// The zero-phase differentiator over about `window_s` at sampling step `dt`.
 fn zero_phase(window_s: f64, dt: f64) -> super::sg::Differentiator {
-    let window_s = window_s.min(ForceRate::MAX_ZERO_PHASE_S);
-    super::sg::Differentiator::new(super::sg::window_of(window_s, 1.0 / dt))
+    super::sg::Differentiator::new(zero_phase_samples(window_s, dt))
+}
+
+/// The samples of the zero-phase window of about `window_s` (at most
+/// [`ForceRate::MAX_ZERO_PHASE_S`]) at sampling step `dt`.
+fn zero_phase_samples(window_s: f64, dt: f64) -> usize {
+    super::sg::window_of(window_s.min(ForceRate::MAX_ZERO_PHASE_S), 1.0 / dt)
 }
 
 /// The force rate of a force signal sampled every `dt`, aligned with the samples
