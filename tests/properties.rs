@@ -318,3 +318,66 @@ proptest! {
         }
     }
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+
+    /// Any trajectory, moving or at rest, fast or slow, through any kernels, with any step,
+    /// noise before the steps and block: every speed class's share of the steps' error is
+    /// finite and not negative, and every sample takes a class's shares: never a panic.
+    #[test]
+    fn the_steps_error_through_the_kernels_is_always_a_finite_share(
+        step in 1e-4f64..0.05,
+        speed in prop::collection::vec(-50.0f64..50.0, 1..8),
+        dither in 0.0f64..1.5,
+        block in 1usize..20,
+        half in 0usize..30,
+        samples in 0usize..1500,
+    ) {
+        use camspring::estimate::quantisation::{
+            Quantisation, RowShares, SpeedShares, SHARE_KERNELS, SPEED_CLASSES,
+        };
+        use camspring::estimate::sg::Differentiator;
+        let dt = 0.01;
+        let speeds: Vec<f64> = (0..samples)
+            .map(|i| speed[i * speed.len() / samples.max(1)])
+            .collect();
+        let mut x = 2.0;
+        let position: Vec<f64> = speeds
+            .iter()
+            .map(|v| {
+                x += v * dt;
+                x
+            })
+            .collect();
+        let diff = Differentiator::new(2 * half + 1);
+        let kernels: [&[f64]; SHARE_KERNELS] = [
+            &diff.weights[0],
+            &diff.weights[1],
+            &diff.weights[2],
+            &diff.weights[3],
+            &diff.weights[4],
+        ];
+        let q = Quantisation {
+            step_mm: step,
+            dither_steps: dither,
+            block,
+            variance_scale: 1.0,
+            kernel_shares: None,
+        };
+        let rows: Vec<usize> = (0..samples).collect();
+        let table = SpeedShares::new(&kernels, &position, &speeds, &rows, &speeds, q, dt);
+        prop_assert_eq!(table.table.len(), SPEED_CLASSES + 1);
+        for class in &table.table {
+            for s in class {
+                prop_assert!(s.is_finite() && *s >= 0.0, "{table:?}");
+            }
+        }
+        let shares = RowShares::new(table, &speeds);
+        for i in 0..samples {
+            for k in 0..SHARE_KERNELS {
+                prop_assert!(shares.share(i, k).is_finite());
+            }
+        }
+    }
+}

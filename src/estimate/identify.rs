@@ -54,7 +54,7 @@ pub use super::adequacy::{
     WHITENESS_LEVEL,
 };
 use super::log::{CalibrationLog, MIN_LOG_SAMPLES};
-use super::quantisation::{kernel_shares, Quantisation};
+use super::quantisation::{Quantisation, RowShares, SpeedShares, SHARE_KERNELS};
 use super::sg::{self, Differentiator};
 pub use super::window::{
     candidate_windows, choose_window, fit_with_noise_uncertainty, WindowCandidate, WindowChoice,
@@ -584,13 +584,22 @@ struct Rows {
     f: Vec<f64>,
     /// The friction sign: at the sample, or through the parallel filter.
     sgn: Vec<f64>,
+    /// The position's, velocity's and acceleration's noise variances, of white noise where
+    /// the position is read in steps (each row's own share in `shares`).
     var_x: f64,
     var_xd: f64,
     var_xdd: f64,
     var_f: f64,
     /// The parallel filter's columns, when the rows went through it.
     filtered: Option<Filtered>,
+    /// A position read in steps: what each row's kernels pass of the steps' error, as shares
+    /// of white noise's, in the order of [`share_kernels`].
+    shares: Option<RowShares>,
 }
+
+/// The share column of the parallel filter's velocity in [`Rows::shares`] (after the four
+/// kernels of [`sg::Differentiator`] identification uses).
+const PARALLEL_SHARE: usize = 4;
 
 /// Rows through the parallel filter ([`Parallel`]): the velocity columns filtered, and the
 /// exponential's filtered column as moments about a k2.
@@ -646,13 +655,49 @@ impl CubeNoise {
         }
     }
 
-    /// The variance of the cube's noise beyond its linear part, at velocity squared `v2`.
-    fn variance(&self, v2: f64) -> f64 {
-        18.0 * v2 * self.second + 6.0 * self.third
+    /// The variance of the cube's noise beyond its linear part, at velocity squared `v2`,
+    /// where the differences' noise is `scale` times the variance it was summed for (its
+    /// second and third orders scale as its square and cube).
+    fn variance(&self, v2: f64, scale: f64) -> f64 {
+        18.0 * v2 * self.second * scale * scale + 6.0 * self.third * scale * scale * scale
     }
 }
 
 impl Rows {
+    /// Row `i`'s share of the steps' error through kernel column `k` (1 without steps).
+    fn share(&self, i: usize, k: usize) -> f64 {
+        self.shares.as_ref().map_or(1.0, |s| s.share(i, k))
+    }
+
+    /// Noise variance of row `i`'s position (through the parallel filter, where it went).
+    fn var_x_at(&self, i: usize) -> f64 {
+        let k = if self.filtered.is_some() {
+            PARALLEL_SHARE
+        } else {
+            sg::POSITION
+        };
+        self.var_x * self.share(i, k)
+    }
+
+    /// Noise variance of row `i`'s velocity column (the filtered one, where the rows went
+    /// through the parallel filter).
+    fn var_xd_at(&self, i: usize) -> f64 {
+        match &self.filtered {
+            Some(q) => q.var_xd * self.share(i, PARALLEL_SHARE),
+            None => self.var_xd * self.share(i, sg::VELOCITY),
+        }
+    }
+
+    /// Noise variance of row `i`'s acceleration.
+    fn var_xdd_at(&self, i: usize) -> f64 {
+        self.var_xdd * self.share(i, sg::ACCELERATION)
+    }
+
+    /// The filtered cube's noise beyond its linear part at row `i` ([`CubeNoise`]).
+    fn cube_noise_at(&self, i: usize, q: &Filtered, v2: f64) -> f64 {
+        q.cube_noise.variance(v2, self.share(i, PARALLEL_SHARE))
+    }
+
     fn subset(&self, keep: &[usize], dynamic: bool) -> Rows {
         let pick = |v: &Vec<f64>| keep.iter().map(|&i| v[i]).collect::<Vec<f64>>();
         let zero = vec![0.0; keep.len()];
@@ -676,6 +721,7 @@ impl Rows {
             var_xdd: if dynamic { self.var_xdd } else { 0.0 },
             var_f: self.var_f,
             filtered: None,
+            shares: self.shares.as_ref().map(|s| s.pick(keep)),
         }
     }
 
@@ -704,6 +750,7 @@ impl Rows {
                 var_xd: par.var_xd,
                 cube_noise: par.cube_noise,
             }),
+            shares: self.shares.as_ref().map(|s| s.pick(keep)),
         }
     }
 
@@ -800,7 +847,7 @@ fn model(p: &V7, r: &Rows, i: usize) -> (f64, V7) {
     let (xd, xd3, e, k2_column) = match &r.filtered {
         None => (
             r.xd[i],
-            unbiased_cube(r.xd[i], r.var_xd),
+            unbiased_cube(r.xd[i], r.var_xd_at(i)),
             at_row,
             p[MU] * r.x[i] * at_row,
         ),
@@ -828,17 +875,17 @@ fn model(p: &V7, r: &Rows, i: usize) -> (f64, V7) {
 fn row_variance(p: &V7, r: &Rows, i: usize) -> f64 {
     let stiffness = p[K2] * p[MU] * (p[K2] * r.x[i]).exp();
     let damping = p[D1] + 3.0 * p[D2] * r.xd[i] * r.xd[i];
-    let var_xd = r.filtered.as_ref().map_or(r.var_xd, |q| q.var_xd);
+    let var_xd = r.var_xd_at(i);
     let linear = r.var_f
-        + stiffness * stiffness * r.var_x
+        + stiffness * stiffness * r.var_x_at(i)
         + damping * damping * var_xd
-        + p[M] * p[M] * r.var_xdd;
+        + p[M] * p[M] * r.var_xdd_at(i);
     // Through the parallel filter the cube's noise of higher order does not cancel with the
     // filter, as its linear part does ([`CubeNoise`]).
     match &r.filtered {
         Some(q) => {
-            let v2 = (q.xd[i] * q.xd[i] - q.var_xd).max(0.0);
-            linear + p[D2] * p[D2] * q.cube_noise.variance(v2)
+            let v2 = (q.xd[i] * q.xd[i] - var_xd).max(0.0);
+            linear + p[D2] * p[D2] * r.cube_noise_at(i, q, v2)
         }
         None => linear,
     }
@@ -873,7 +920,7 @@ pub(crate) fn unbiased_cube(o: f64, s2: f64) -> f64 {
 fn row_correction(r: &Rows, i: usize, active: &Active) -> M7 {
     let mut c = M7::zeros();
     if active[M] {
-        c[(M, M)] = r.var_xdd;
+        c[(M, M)] = r.var_xdd_at(i);
     }
     // The velocity column o and its noise variance. Directly, o is the velocity kernel's
     // output and the cube is taken of it, so the single-sample moments above hold. Through
@@ -881,9 +928,10 @@ fn row_correction(r: &Rows, i: usize, active: &Active) -> M7 {
     // noise, the velocity nearly constant over the filter, the linear terms are the filtered
     // variance's), and the cube's higher-order terms are summed over Q's correlated taps
     // ([`CubeNoise`]).
-    let (o, var_o) = match &r.filtered {
-        Some(q) => (q.xd[i], q.var_xd),
-        None => (r.xd[i], r.var_xd),
+    let var_o = r.var_xd_at(i);
+    let o = match &r.filtered {
+        Some(q) => q.xd[i],
+        None => r.xd[i],
     };
     if var_o > 0.0 {
         let o2 = o * o;
@@ -898,7 +946,7 @@ fn row_correction(r: &Rows, i: usize, active: &Active) -> M7 {
         }
         if active[D2] {
             c[(D2, D2)] = match &r.filtered {
-                Some(q) => 9.0 * v4 * var_o + q.cube_noise.variance(v2),
+                Some(q) => 9.0 * v4 * var_o + r.cube_noise_at(i, q, v2),
                 // (In this order the direct rows' sum is the one it always was, to the last
                 // bit.)
                 None => {
@@ -1685,23 +1733,28 @@ fn fit_regression(
     let n = x.len();
     let f = log.force_n[h..h + n].to_vec();
     // A position read in steps: each kernel's noise is what it passes of the steps' error at
-    // the speeds the log moves at, not white noise's ([`quantisation_shares`]).
-    let (variance_of, parallel_noise) = match noise.position_quantisation {
+    // each row's speed, not white noise's ([`RowShares`]); the rows' variances are white
+    // noise's, times their shares. Which samples move is judged against the motion
+    // velocity's share over the log's moving samples ([`quantisation_shares`]).
+    let (variance_of, parallel_noise, shares) = match noise.position_quantisation {
         Some(q) => {
-            let shares = q
-                .kernel_shares
-                .unwrap_or_else(|| quantisation_shares(log, noise, diff, q));
+            let white_band = 3.0
+                * diff
+                    .noise_variance(sg::MOTION_VELOCITY, noise.position_variance_mm2, dt)
+                    .sqrt();
+            let (rows, motion_share) = row_shares(log, diff, q, &motion, white_band);
             let white = q.white_variance_mm2();
             let parallel = SensorNoise {
-                position_variance_mm2: white * shares[4],
+                position_variance_mm2: white,
                 ..*noise
             };
             (
-                [shares[0], shares[1], shares[2], shares[3]].map(|s| s * white),
+                [white, white, white, white * motion_share],
                 parallel,
+                Some(rows),
             )
         }
-        None => ([noise.position_variance_mm2; 4], *noise),
+        None => ([noise.position_variance_mm2; 4], *noise, None),
     };
     let var_x = diff.noise_variance(sg::POSITION, variance_of[sg::POSITION], dt);
     let var_xd = diff.noise_variance(sg::VELOCITY, variance_of[sg::VELOCITY], dt);
@@ -1741,6 +1794,7 @@ fn fit_regression(
         var_xdd,
         var_f: noise.force_variance_n2,
         filtered: None,
+        shares,
     };
     // The samples the parallel filter reaches each side (see [`parallel_columns`]).
     let reach = 2 * (acceleration_smoother(diff).len() / 2) + 1;
@@ -1978,7 +2032,8 @@ fn fit_regression(
     let inertia_signal = |r: &Rows| {
         r.xdd
             .iter()
-            .map(|a| (a * a - r.var_xdd).max(0.0))
+            .enumerate()
+            .map(|(i, a)| (a * a - r.var_xdd_at(i)).max(0.0))
             .sum::<f64>()
     };
     let inertia_signal_before = inertia_signal(&rows);
@@ -2223,7 +2278,8 @@ fn parallel_columns(
         .collect();
     let cube: Vec<f64> = difference
         .iter()
-        .map(|&v| unbiased_cube(v, var_difference))
+        .enumerate()
+        .map(|(i, &v)| unbiased_cube(v, var_difference * all.share(i, PARALLEL_SHARE)))
         .collect();
     let through_q: Vec<f64> = parallel_velocity_weights(&q_full)
         .iter()
@@ -2243,51 +2299,152 @@ fn parallel_columns(
     }
 }
 
+/// The trajectory a log's rod followed, as the quantisation error's shares are summed along
+/// it ([`trajectory_shares`]): the position and speed smoothed over about a second, aligned
+/// with the log's samples (NaN within the smoother's reach of either end). A step's error
+/// averages out of it, and its phase along a window is the rod's. Over shorter smoothers the
+/// steps' own error stayed in the trajectory and scrambled the harmonics' phases: on a servo
+/// log read in 1.3 um steps at 100 Hz the velocity kernels' shares came out 0.75 over 0.2 s
+/// where the true trajectory gives 1.06, and over a second 1.04.
+struct Trajectory {
+    position_mm: Vec<f64>,
+    speed_mm_s: Vec<f64>,
+}
+
+impl Trajectory {
+    fn of(log: &CalibrationLog) -> Trajectory {
+        let dt = log.dt_s();
+        let smooth =
+            Differentiator::new(((1.0 / dt).round().min(1e6) as usize).max(sg::MIN_WINDOW) | 1);
+        let along = |values: Vec<f64>| -> Vec<f64> {
+            let mut out = vec![f64::NAN; log.len()];
+            if let Some(span) = out.get_mut(smooth.half..smooth.half + values.len()) {
+                span.copy_from_slice(&values);
+            }
+            out
+        };
+        Trajectory {
+            position_mm: along(sg::smooth(
+                &log.position_mm,
+                &sg::quintic_smoother(smooth.half),
+            )),
+            speed_mm_s: along(smooth.apply(&log.position_mm, dt, sg::RATE)),
+        }
+    }
+}
+
+/// The kernels whose shares of a quantisation error identification weighs its rows by, in
+/// the order of [`Rows::shares`]: the position, velocity, acceleration and motion-velocity
+/// kernels, and the parallel filter's velocity ([`PARALLEL_SHARE`]).
+fn share_kernels(diff: &Differentiator) -> [Vec<f64>; SHARE_KERNELS] {
+    [
+        diff.weights[sg::POSITION].clone(),
+        diff.weights[sg::VELOCITY].clone(),
+        diff.weights[sg::ACCELERATION].clone(),
+        diff.weights[sg::MOTION_VELOCITY].clone(),
+        parallel_velocity_weights(&force_filter(&acceleration_smoother(diff)).0),
+    ]
+}
+
 /// What each of identification's kernels at `diff` passes of a position's quantisation error
-/// `q`, as a share of white noise of the uniform error's variance ([`kernel_shares`]): the
-/// position, velocity, acceleration and motion-velocity kernels, and the parallel filter's
-/// velocity. The speeds are the moving samples' (beyond the white-noise band of the motion
-/// velocity), read over about a second, where the steps' error averages out of the speed: at
-/// a cruise speed the error's harmonics alias to where the speed puts them, and a speed read
-/// over a short fitted window smeared them (on a 15.6 um encoder at 100 Hz the acceleration
-/// kernel's share at 0.43 s came out 1.5 against a true 3.3; read over a second, 2.9).
+/// `q` at each speed the log moves at ([`SpeedShares`]), as shares of white noise of the
+/// uniform error's variance, summed along the log's [`Trajectory`] over every row.
 pub(super) fn quantisation_shares(
     log: &CalibrationLog,
-    noise: &SensorNoise,
     diff: &Differentiator,
     q: Quantisation,
-) -> [f64; 5] {
-    let dt = log.dt_s();
-    let motion = diff.apply(&log.position_mm, dt, sg::MOTION_VELOCITY);
-    let vmax = motion.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
-    let white_band = 3.0
-        * diff
-            .noise_variance(sg::MOTION_VELOCITY, noise.position_variance_mm2, dt)
-            .sqrt();
-    let smooth =
-        Differentiator::new(((1.0 / dt).round().min(1e6) as usize).max(sg::MIN_WINDOW) | 1);
-    let long_speed = smooth.apply(&log.position_mm, dt, sg::RATE);
-    let speeds: Vec<f64> = motion
-        .iter()
-        .enumerate()
-        .filter(|(_, v)| v.abs() > white_band.max(1e-3 * vmax))
-        .filter_map(|(i, _)| {
-            (i + diff.half)
-                .checked_sub(smooth.half)
-                .and_then(|j| long_speed.get(j))
-                .copied()
-        })
-        .collect();
-    let through = parallel_velocity_weights(&force_filter(&acceleration_smoother(diff)).0);
-    let kernels = [
-        &diff.weights[sg::POSITION][..],
-        &diff.weights[sg::VELOCITY],
-        &diff.weights[sg::ACCELERATION],
-        &diff.weights[sg::MOTION_VELOCITY],
-        &through,
+) -> SpeedShares {
+    speed_shares(log, &Trajectory::of(log), diff, q)
+}
+
+fn speed_shares(
+    log: &CalibrationLog,
+    trajectory: &Trajectory,
+    diff: &Differentiator,
+    q: Quantisation,
+) -> SpeedShares {
+    let kernels = share_kernels(diff);
+    let refs: [&[f64]; SHARE_KERNELS] = [
+        &kernels[0],
+        &kernels[1],
+        &kernels[2],
+        &kernels[3],
+        &kernels[4],
     ];
-    let all = kernel_shares(&kernels, &speeds, q, dt);
-    [all[0], all[1], all[2], all[3], all[4]]
+    let row_speeds = class_speeds(log, diff);
+    let rows: Vec<usize> = (0..row_speeds.len()).map(|i| i + diff.half).collect();
+    SpeedShares::new(
+        &refs,
+        &trajectory.position_mm,
+        &trajectory.speed_mm_s,
+        &rows,
+        &row_speeds,
+        q,
+        log.dt_s(),
+    )
+}
+
+/// The speed (mm/s) each of identification's rows at `diff` is classed by in
+/// [`SpeedShares`]: the mean over about a second about it (the positions half a second
+/// either side, differenced; nearer the log's ends, the first or last second's). One
+/// subtraction a row, where the [`Trajectory`]'s smoothed speed is a hundred.
+fn class_speeds(log: &CalibrationLog, diff: &Differentiator) -> Vec<f64> {
+    let dt = log.dt_s();
+    let n = log.len();
+    let rows = n.saturating_sub(2 * diff.half);
+    let reach = (((0.5 / dt).round() as usize).max(1)).min(n.saturating_sub(1) / 2);
+    if reach == 0 {
+        return vec![0.0; rows];
+    }
+    let y = &log.position_mm;
+    (0..rows)
+        .map(|i| {
+            let c = (i + diff.half).clamp(reach, n - 1 - reach);
+            (y[c + reach] - y[c - reach]) / (2 * reach) as f64 / dt
+        })
+        .collect()
+}
+
+/// Each of identification's rows' shares of a position's quantisation error `q`
+/// ([`RowShares`]), by the row's speed ([`class_speeds`]), with the motion velocity's mean
+/// share over the rows the fit takes as moving: those beyond three of its standard
+/// deviations at that share, first read over the rows beyond white noise's band
+/// (`white_band`). The rows between the two bands creep a step in many samples and pass
+/// several times white noise's share.
+fn row_shares(
+    log: &CalibrationLog,
+    diff: &Differentiator,
+    q: Quantisation,
+    motion: &[f64],
+    white_band: f64,
+) -> (RowShares, f64) {
+    let speeds = q
+        .kernel_shares
+        .unwrap_or_else(|| quantisation_shares(log, diff, q));
+    let rows = RowShares::new(speeds, &class_speeds(log, diff));
+    let vmax = motion.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    let mean_beyond = |band: f64| {
+        let (sum, count) = motion
+            .iter()
+            .enumerate()
+            .filter(|(_, v)| v.abs() > band.max(1e-3 * vmax))
+            .fold((0.0, 0usize), |(s, c), (i, _)| {
+                (s + rows.share(i, sg::MOTION_VELOCITY), c + 1)
+            });
+        (count > 0).then(|| sum / count as f64)
+    };
+    let dt = log.dt_s();
+    let first = mean_beyond(white_band).unwrap_or(1.0);
+    let fit_band = 3.0
+        * diff
+            .noise_variance(sg::MOTION_VELOCITY, q.white_variance_mm2() * first, dt)
+            .sqrt();
+    let share = if fit_band > white_band {
+        mean_beyond(fit_band).unwrap_or(first)
+    } else {
+        first
+    };
+    (rows, share)
 }
 
 /// The weights (unit sample spacing) of the parallel filter's velocity on the logged
@@ -2383,8 +2540,8 @@ fn inertia_attenuation(
         .map(|(k, qk)| qk * autocorrelation(2 * k.abs_diff(half)))
         .sum::<f64>()
         / r0;
-    let noise = rows.var_xdd;
-    let (mut power, mut smoothed, mut weight) = (0.0, 0.0, 0.0);
+    // sum_k w_k var(a_k): each row's own noise.
+    let (mut power, mut smoothed, mut noise) = (0.0, 0.0, 0.0);
     for (k, &i) in rows.index.iter().enumerate() {
         if i < 2 * half || i + 2 * half >= n {
             continue;
@@ -2397,13 +2554,13 @@ fn inertia_attenuation(
             .sum();
         power += weights[k] * a * a;
         smoothed += weights[k] * qa * a;
-        weight += weights[k];
+        noise += weights[k] * rows.var_xdd_at(k);
     }
-    let signal = power - noise * weight;
+    let signal = power - noise;
     if signal.partial_cmp(&(ATTENUATION_MIN_SIGNAL * power)) != Some(std::cmp::Ordering::Greater) {
         return None;
     }
-    let r = 1.0 - (smoothed - noise * cross_per_var * weight) / signal;
+    let r = 1.0 - (smoothed - noise * cross_per_var) / signal;
     r.is_finite().then_some(r)
 }
 
@@ -2532,7 +2689,7 @@ mod tests {
             let t = trials as f64;
             let var_o = sum_o2 / t - (sum_o / t).powi(2);
             let var_c = sum_c2 / t - (sum_c / t).powi(2);
-            let predicted = 9.0 * v.powi(4) * var_o + noise.variance(v * v);
+            let predicted = 9.0 * v.powi(4) * var_o + noise.variance(v * v, 1.0);
             // The sample variance of 40 000 draws is known to about sqrt(2 / 40 000) = 0.7 %
             // for a Gaussian; the cube's tails are heavier, so 5 % is about four of its
             // standard deviations.

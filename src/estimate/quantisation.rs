@@ -15,11 +15,20 @@
 //! redraws of the force noise; in 15.6 um steps at 100 Hz they passed 1.1 to 3.3 times it
 //! (docs/CALIBRATION.md, "A quantised position through the kernels").
 //!
-//! [`kernel_shares`] is that share for each kernel, from the speeds the log moves at: the
-//! sawtooth's harmonics at each speed, through the block mean identification reduces a fast
-//! log by and the kernel, against white noise of variance q^2 / 12 through the same. Against
-//! the rig's true error it came within 5 to 15 %; against sines read in steps (the speed
-//! sweeping through every alias) within a factor 1.5.
+//! [`trajectory_shares`] is that share for each kernel, summed along the path the rod
+//! followed: with the error's phase on a step unknown (uniform), harmonic n through a kernel
+//! at a sample has the variance of its amplitude times |sum_j w_j z_n(j)|^2, z_n the block
+//! mean of exp(2 pi i n x / q) over the sample's logged samples. That is exact for a known
+//! path; the path identification uses is the log's own, smoothed over a second. Against the
+//! rig's true error (with its true path) it came within 15 % on S-curves, trapezoids, servo
+//! ramps, multisines and a force-controlled rod at 100 Hz to 1 kHz, where a share worked out
+//! at each sample's steady speed overstated by up to 2.1 times; on sines, averaged over where
+//! their turns fall on a step, within 10 %.
+//!
+//! What passes depends on the speed: nothing of a rest's constant error through a derivative
+//! kernel, many times white noise's share where the rod creeps a step in many samples. So
+//! each fitted row takes the shares of its speed class ([`SpeedShares`], [`RowShares`]), not
+//! one average over the log.
 
 use std::f64::consts::PI;
 
@@ -35,11 +44,11 @@ pub struct Quantisation {
     /// A factor on the error's variance: 1, or raised to carry the model's uncertainty
     /// ([`super::window::fit_with_noise_uncertainty`]).
     pub variance_scale: f64,
-    /// What identification's kernels at one window pass of the error, as shares of white
-    /// noise of the uniform error's variance (position, velocity, acceleration, motion
-    /// velocity, the parallel filter's velocity), once worked out for that window; `None`:
-    /// worked out at each fit.
-    pub kernel_shares: Option<[f64; 5]>,
+    /// What identification's kernels at one window pass of the error at each speed, as
+    /// shares of white noise of the uniform error's variance (position, velocity,
+    /// acceleration, motion velocity, the parallel filter's velocity), once worked out for
+    /// that window; `None`: worked out at each fit.
+    pub kernel_shares: Option<SpeedShares>,
 }
 
 impl Quantisation {
@@ -51,135 +60,311 @@ impl Quantisation {
     }
 }
 
-/// Harmonics of the sawtooth summed exactly; the rest (a share 6 / (pi^2 N) of its power,
-/// 0.2 %) are counted as white noise.
-pub const HARMONICS: usize = 256;
+/// Harmonics of the sawtooth summed along the trajectory; the rest (a share
+/// 6 / (pi^2 N) of its power, 1.9 %) are counted as white noise.
+pub const HARMONICS: usize = 32;
 
-/// Points of the kernel's power response tabulated over [0, pi] (linear interpolation).
-pub const RESPONSE_POINTS: usize = 2048;
-
-/// Speed classes (logarithmic) the moving samples are counted in, each taken at its samples'
-/// mean speed. Where the sawtooth's harmonics alias, the share swings with the speed: a class
-/// spans a part in a thousand of a speed range of four decades, so an alias moves by a few
-/// hundredths of the band across one at ten steps a sample. A motion controller's cruise
-/// speed, held for whole moves, falls into one class and is taken at its own value.
-pub const SPEED_CLASSES: usize = 2048;
+/// At most this many of the rows asked for are summed, evenly spread over them: a row's
+/// share is a sum over its kernels' windows, and neighbouring rows' windows overlap, so the
+/// mean over a spread of rows is the mean over all of them to a few per cent at a bounded
+/// cost whatever the log's length.
+pub const SHARE_ROWS: usize = 1024;
 
 /// The shares, relative to white noise of the uniform error's variance, of the quantisation
-/// error's power that each of `kernels` (at the fitted samples' spacing `dt_s`, unit sample
-/// spacing as in [`super::sg::Differentiator`]) passes, averaged over the samples moving at
-/// `speeds_mm_s` (their absolute values are used; zero speeds pass nothing). 1 for an empty
-/// set of speeds or a kernel of no power. The harmonics' frequencies and the block mean's
-/// response are computed once for all the kernels.
-pub fn kernel_shares(
+/// error's power that each of `kernels` (odd lengths, centred, unit sample spacing as in
+/// [`super::sg::Differentiator`]) passes at the fitted samples `rows`, on average, for a rod
+/// that followed `position_mm` at `speed_mm_s` (one value per fitted sample, spaced `dt_s`;
+/// each sample the mean of `q.block` logged ones).
+///
+/// The error is a function of the position, e(x) = sum_n a_n sin(2 pi n x / q) with
+/// a_n^2 / 2 = q^2 / (2 pi^2 n^2); where on a step the rod started is unknown, so the error's
+/// phase is uniform and its harmonics are uncorrelated. A kernel w at a row passes harmonic n
+/// with variance a_n^2 / 2 |sum_j w_j z_n(j)|^2, where z_n(j) is the block mean of
+/// exp(2 pi i n x / q) over sample j's logged samples: exp(2 pi i n x_j / q) times the
+/// Dirichlet kernel at the sample's speed. Summed along the trajectory, the speed may change
+/// within a window, as it does on sines, S-curves and a force-controlled rod, where a share
+/// worked out at each row's steady speed overstated what passed by up to 2.1 times.
+/// Rows whose windows reach beyond the trajectory, or where it is not finite, are skipped;
+/// at most [`SHARE_ROWS`] of the rest are summed where `spread`. None when no row is left,
+/// there are no kernels, or the step is not positive.
+pub fn trajectory_shares(
     kernels: &[&[f64]],
-    speeds_mm_s: &[f64],
+    position_mm: &[f64],
+    speed_mm_s: &[f64],
+    rows: &[usize],
     q: Quantisation,
     dt_s: f64,
-) -> Vec<f64> {
-    let moving: Vec<f64> = speeds_mm_s
-        .iter()
-        .map(|v| v.abs())
-        .filter(|v| v.is_finite() && *v > 0.0)
-        .collect();
-    let powers: Vec<f64> = kernels
-        .iter()
-        .map(|w| w.iter().map(|c| c * c).sum())
-        .collect();
-    if moving.is_empty() || q.step_mm.is_nan() || q.step_mm <= 0.0 {
-        return vec![1.0; kernels.len()];
+    spread: bool,
+) -> Option<Vec<f64>> {
+    let k_count = kernels.len();
+    if !(q.step_mm > 0.0 && q.step_mm.is_finite()) || k_count == 0 {
+        return None;
     }
-    let block = q.block.max(1);
-    let b = block as f64;
-    // |H(w)|^2 of each kernel at the fitted samples' frequency w in [0, pi]; e^{-i w k} by
-    // rotation, renormalised each sample.
-    let step = PI / (RESPONSE_POINTS - 1) as f64;
-    let responses: Vec<Vec<f64>> = kernels
+    let n = position_mm.len().min(speed_mm_s.len());
+    let reach = kernels.iter().map(|w| w.len() / 2).max().unwrap_or(0);
+    let usable: Vec<usize> = rows
         .iter()
-        .map(|weights| {
-            (0..RESPONSE_POINTS)
-                .map(|j| {
-                    let w = j as f64 * step;
-                    let (rot_re, rot_im) = (w.cos(), -w.sin());
-                    let (mut z_re, mut z_im) = (1.0, 0.0);
-                    let (mut re, mut im) = (0.0, 0.0);
-                    for c in weights.iter() {
-                        re += c * z_re;
-                        im += c * z_im;
-                        (z_re, z_im) =
-                            (z_re * rot_re - z_im * rot_im, z_re * rot_im + z_im * rot_re);
-                    }
-                    re * re + im * im
-                })
-                .collect()
+        .copied()
+        .filter(|&r| r >= reach && r + reach < n)
+        .filter(|&r| {
+            (r - reach..=r + reach).all(|j| position_mm[j].is_finite() && speed_mm_s[j].is_finite())
         })
         .collect();
+    if usable.is_empty() {
+        return None;
+    }
+    let picked = if spread {
+        spread_over(&usable, SHARE_ROWS)
+    } else {
+        usable
+    };
+    let block = q.block.max(1);
+    let b = block as f64;
     let raw_dt = dt_s / b;
     // Analog noise of s steps before the steps leaves harmonic n of the sawtooth (its mean
     // over the noise) exp(-2 pi^2 n^2 s^2) of its amplitude; the power it loses, the
     // harmonics beyond the last summed, and the noise's own s^2 steps^2 are white.
     let dither = q.dither_steps.max(0.0);
     let kept: Vec<f64> = (1..=HARMONICS)
-        .map(|n| (-4.0 * PI * PI * (n * n) as f64 * dither * dither).exp())
+        .map(|h| (-4.0 * PI * PI * (h * h) as f64 * dither * dither).exp())
         .collect();
     let tail = 1.0
         - 6.0 / (PI * PI)
             * (1..=HARMONICS)
                 .zip(&kept)
-                .map(|(n, k)| k / (n * n) as f64)
+                .map(|(h, k)| k / (h * h) as f64)
                 .sum::<f64>()
         + 12.0 * dither * dither;
-    // Each kernel's passed power over the white reference (power / b: white noise of the
-    // logged samples' variance through the block mean and the kernel), at one speed.
-    let shares_at = |v: f64, out: &mut [f64]| {
-        let cycles = v / q.step_mm * raw_dt;
-        out.iter_mut().for_each(|o| *o = 0.0);
-        for (n, kept) in (1..=HARMONICS).zip(&kept) {
-            let n = n as f64;
-            // The harmonic at the logged samples' frequency, folded into [0, 2 pi).
-            let w = (2.0 * PI * n * cycles).rem_euclid(2.0 * PI);
-            let half = 0.5 * w;
-            let box2 = if block == 1 || half.sin().abs() < 1e-12 {
-                1.0
-            } else {
-                ((b * half).sin() / (b * half.sin())).powi(2)
-            };
-            // The kernel at b w, folded into [0, pi] (even and 2 pi periodic).
-            let k = (b * w).rem_euclid(2.0 * PI);
-            let k = if k > PI { 2.0 * PI - k } else { k };
-            let x = k / step;
-            let i = (x.floor() as usize).min(RESPONSE_POINTS - 2);
-            let f = x - i as f64;
-            let weight = 6.0 / (PI * PI * n * n) * box2 * kept;
-            for (o, r) in out.iter_mut().zip(&responses) {
-                *o += weight * (r[i] * (1.0 - f) + r[i + 1] * f);
+    let powers: Vec<f64> = kernels
+        .iter()
+        .map(|w| w.iter().map(|c| c * c).sum())
+        .collect();
+    // sum_j w_j z_n(j) for each kernel and harmonic, at one row.
+    let mut sums = vec![(0.0_f64, 0.0_f64); k_count * HARMONICS];
+    let mut taps = vec![0.0; k_count];
+    let mut total = vec![0.0; k_count];
+    for &row in &picked {
+        sums.iter_mut().for_each(|s| *s = (0.0, 0.0));
+        for j in row - reach..=row + reach {
+            // Each kernel's tap at sample j (0 beyond its own reach).
+            for (t, w) in taps.iter_mut().zip(kernels) {
+                let half = w.len() / 2;
+                *t = (j + half)
+                    .checked_sub(row)
+                    .and_then(|i| w.get(i))
+                    .copied()
+                    .unwrap_or(0.0);
+            }
+            let theta = 2.0 * PI * position_mm[j] / q.step_mm;
+            let (base_im, base_re) = theta.sin_cos();
+            // The block mean's Dirichlet kernel D_n = sin(n b a) / (b sin(n a)), a the half
+            // phase step per logged sample, by rotation in n.
+            let a = PI * speed_mm_s[j] * raw_dt / q.step_mm;
+            let (rot_a_im, rot_a_re) = a.sin_cos();
+            let (rot_ba_im, rot_ba_re) = (b * a).sin_cos();
+            let (mut z_re, mut z_im) = (1.0, 0.0);
+            let (mut na_re, mut na_im) = (1.0, 0.0);
+            let (mut nba_re, mut nba_im) = (1.0, 0.0);
+            for h in 0..HARMONICS {
+                (z_re, z_im) = (
+                    z_re * base_re - z_im * base_im,
+                    z_re * base_im + z_im * base_re,
+                );
+                (na_re, na_im) = (
+                    na_re * rot_a_re - na_im * rot_a_im,
+                    na_re * rot_a_im + na_im * rot_a_re,
+                );
+                (nba_re, nba_im) = (
+                    nba_re * rot_ba_re - nba_im * rot_ba_im,
+                    nba_re * rot_ba_im + nba_im * rot_ba_re,
+                );
+                let dirichlet = if block == 1 || na_im.abs() < 1e-12 {
+                    1.0
+                } else {
+                    nba_im / (b * na_im)
+                };
+                let (zr, zi) = (z_re * dirichlet, z_im * dirichlet);
+                for (k, &c) in taps.iter().enumerate() {
+                    let s = &mut sums[k * HARMONICS + h];
+                    s.0 += c * zr;
+                    s.1 += c * zi;
+                }
             }
         }
-        for (o, p) in out.iter_mut().zip(&powers) {
-            *o = if *p > 0.0 { *o / (p / b) + tail } else { 1.0 };
-        }
-    };
-    // Speeds counted in logarithmic classes, each taken at its samples' mean speed.
-    let (lo, hi) = moving
-        .iter()
-        .fold((f64::INFINITY, 0.0_f64), |(a, b), &v| (a.min(v), b.max(v)));
-    let span = (hi / lo).ln().max(1e-12);
-    let mut classes = vec![(0usize, 0.0_f64); SPEED_CLASSES];
-    for v in &moving {
-        let c = ((v / lo).ln() / span * SPEED_CLASSES as f64) as usize;
-        let class = &mut classes[c.min(SPEED_CLASSES - 1)];
-        class.0 += 1;
-        class.1 += v;
-    }
-    let mut total = vec![0.0; kernels.len()];
-    let mut at = vec![0.0; kernels.len()];
-    for &(count, sum) in classes.iter().filter(|(count, _)| *count > 0) {
-        shares_at(sum / count as f64, &mut at);
-        for (t, a) in total.iter_mut().zip(&at) {
-            *t += count as f64 * a;
+        for (k, t) in total.iter_mut().enumerate() {
+            *t += (0..HARMONICS)
+                .map(|h| {
+                    let (re, im) = sums[k * HARMONICS + h];
+                    let n = (h + 1) as f64;
+                    6.0 / (PI * PI * n * n) * kept[h] * (re * re + im * im)
+                })
+                .sum::<f64>();
         }
     }
-    total.iter().map(|t| t / moving.len() as f64).collect()
+    Some(
+        total
+            .iter()
+            .zip(&powers)
+            .map(|(t, p)| {
+                if *p > 0.0 {
+                    t / picked.len() as f64 / (p / b) + tail
+                } else {
+                    1.0
+                }
+            })
+            .collect(),
+    )
+}
+
+/// At most `count` of `rows`, spread over them by the golden ratio's multiples (a
+/// low-discrepancy sequence), in order. An even stride can fall in step with a periodic
+/// motion (a rod creeping a step every so many samples) and sum its rows at one phase of it:
+/// on a creep of 0.02 steps a sample, every 78th row's shares were 37 % above the mean over
+/// every tenth. All of them where there are no more than `count`.
+fn spread_over(rows: &[usize], count: usize) -> Vec<usize> {
+    if rows.len() <= count {
+        return rows.to_vec();
+    }
+    let golden = (5.0_f64.sqrt() - 1.0) / 2.0;
+    let mut picked: Vec<usize> = (0..count)
+        .map(|k| rows[((k as f64 * golden).fract() * rows.len() as f64) as usize % rows.len()])
+        .collect();
+    picked.sort_unstable();
+    picked
+}
+
+/// Speed classes (logarithmic, four to a decade) a log's samples are grouped in by
+/// [`SpeedShares`], from [`REST_SPEED_SHARE`] of the fastest speed up.
+pub const SPEED_CLASSES: usize = 20;
+
+/// The speed, as a share of the fastest, below which a sample counts as at rest in
+/// [`SpeedShares`].
+pub const REST_SPEED_SHARE: f64 = 1e-5;
+
+/// At most this many samples of each speed class are summed along the trajectory
+/// ([`trajectory_shares`]).
+pub const CLASS_ROWS: usize = 256;
+
+/// The kernels [`SpeedShares`] holds shares for.
+pub const SHARE_KERNELS: usize = 5;
+
+/// What the kernels pass of the quantisation error at each speed: [`trajectory_shares`]
+/// averaged over the samples of each speed class. The error is not stationary: a rod at rest
+/// holds a constant error that no derivative kernel passes, a rod creeping a step in many
+/// samples puts it all inside the kernels' band, and a fast one spreads it over the aliases;
+/// one share averaged over a log's samples weighs slow and fast samples alike, and is wrong
+/// for any set of samples but the one it was averaged over. Each sample takes its class's
+/// shares instead.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SpeedShares {
+    /// The fastest speed (mm/s) the classes are drawn from.
+    pub fastest_mm_s: f64,
+    /// The shares at rest (index 0) and in each class, one per kernel.
+    pub table: [[f64; SHARE_KERNELS]; SPEED_CLASSES + 1],
+}
+
+impl SpeedShares {
+    /// The shares of `kernels` for a rod that followed `position_mm` at `speed_mm_s` (one
+    /// value per fitted sample), at the samples `rows` (their centres), grouped by their
+    /// speeds `row_speeds_mm_s` (one per row). A class none of whose samples can be summed
+    /// takes the nearest class's shares below it, else above it, else 1.
+    pub fn new(
+        kernels: &[&[f64]; SHARE_KERNELS],
+        position_mm: &[f64],
+        speed_mm_s: &[f64],
+        rows: &[usize],
+        row_speeds_mm_s: &[f64],
+        q: Quantisation,
+        dt_s: f64,
+    ) -> SpeedShares {
+        let fastest = row_speeds_mm_s
+            .iter()
+            .map(|v| v.abs())
+            .filter(|v| v.is_finite())
+            .fold(0.0_f64, f64::max);
+        let mut shares = SpeedShares {
+            fastest_mm_s: fastest,
+            table: [[1.0; SHARE_KERNELS]; SPEED_CLASSES + 1],
+        };
+        let mut members: Vec<Vec<usize>> = vec![Vec::new(); SPEED_CLASSES + 1];
+        for (&r, &v) in rows.iter().zip(row_speeds_mm_s) {
+            members[shares.class_of(v)].push(r);
+        }
+        let mut known = [false; SPEED_CLASSES + 1];
+        for (c, rows) in members.iter().enumerate() {
+            if rows.is_empty() {
+                continue;
+            }
+            let picked = spread_over(rows, CLASS_ROWS);
+            if let Some(at) =
+                trajectory_shares(kernels, position_mm, speed_mm_s, &picked, q, dt_s, false)
+            {
+                shares.table[c].copy_from_slice(&at);
+                known[c] = true;
+            }
+        }
+        for c in 0..=SPEED_CLASSES {
+            if !known[c] {
+                let below = (0..c).rev().find(|&b| known[b]);
+                let above = (c + 1..=SPEED_CLASSES).find(|&a| known[a]);
+                if let Some(from) = below.or(above) {
+                    shares.table[c] = shares.table[from];
+                }
+            }
+        }
+        shares
+    }
+
+    /// The class of a sample moving at `speed_mm_s` (0: at rest, or not finite).
+    pub fn class_of(&self, speed_mm_s: f64) -> usize {
+        let v = speed_mm_s.abs();
+        let lo = self.fastest_mm_s * REST_SPEED_SHARE;
+        if !(v.is_finite() && lo > 0.0 && v >= lo) {
+            return 0;
+        }
+        let span = (1.0 / REST_SPEED_SHARE).ln();
+        1 + (((v / lo).ln() / span * SPEED_CLASSES as f64) as usize).min(SPEED_CLASSES - 1)
+    }
+
+    /// The shares at `speed_mm_s`.
+    pub fn at(&self, speed_mm_s: f64) -> [f64; SHARE_KERNELS] {
+        self.table[self.class_of(speed_mm_s)]
+    }
+}
+
+/// Each of a set of samples' shares ([`SpeedShares`] at the sample's speed).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RowShares {
+    /// Each sample's speed class.
+    pub class: Vec<u8>,
+    /// The classes' shares.
+    pub speeds: SpeedShares,
+}
+
+impl RowShares {
+    /// The shares of samples moving at `speeds_mm_s`.
+    pub fn new(speeds: SpeedShares, speeds_mm_s: &[f64]) -> RowShares {
+        RowShares {
+            class: speeds_mm_s
+                .iter()
+                .map(|&v| speeds.class_of(v) as u8)
+                .collect(),
+            speeds,
+        }
+    }
+
+    /// Sample `i`'s share through kernel `k`.
+    pub fn share(&self, i: usize, k: usize) -> f64 {
+        self.speeds.table[self.class[i] as usize][k]
+    }
+
+    /// The shares of the samples `keep`, in that order.
+    pub fn pick(&self, keep: &[usize]) -> RowShares {
+        RowShares {
+            class: keep.iter().map(|&i| self.class[i]).collect(),
+            speeds: self.speeds,
+        }
+    }
 }
 
 #[cfg(test)]
@@ -187,29 +372,31 @@ mod tests {
     use super::*;
     use crate::estimate::sg::{self, Differentiator};
 
-    /// A sine of `amplitude` (mm) at `hz` read in steps `q`, block-averaged: the block means'
-    /// quantisation error and the block-mean speeds.
+    /// A sine of `amplitude` (mm) about 7 mm + `offset` at `hz` read in steps `q`,
+    /// block-averaged: the block means' quantisation error, positions and speeds.
     fn quantised_sine(
         amplitude: f64,
         hz: f64,
         q: f64,
         raw_dt: f64,
         block: usize,
-    ) -> (Vec<f64>, Vec<f64>) {
+        offset: f64,
+    ) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
         let n = 600_000;
         let w = 2.0 * PI * hz;
-        let (error, speed): (Vec<f64>, Vec<f64>) = (0..n)
-            .map(|i| {
-                let t = i as f64 * raw_dt;
-                let x = 7.0 + amplitude * (w * t).sin();
-                ((x / q).round() * q - x, amplitude * w * (w * t).cos())
-            })
-            .unzip();
+        let mut error = Vec::with_capacity(n);
+        let mut position = Vec::with_capacity(n);
+        let mut speed = Vec::with_capacity(n);
+        for i in 0..n {
+            let t = i as f64 * raw_dt;
+            let x = 7.0 + offset + amplitude * (w * t).sin();
+            error.push((x / q).round() * q - x);
+            position.push(x);
+            speed.push(amplitude * w * (w * t).cos());
+        }
         let mean = |c: &[f64]| c.iter().sum::<f64>() / block as f64;
-        (
-            error.chunks_exact(block).map(mean).collect(),
-            speed.chunks_exact(block).map(mean).collect(),
-        )
+        let blocks = |v: Vec<f64>| v.chunks_exact(block).map(mean).collect::<Vec<f64>>();
+        (blocks(error), blocks(position), blocks(speed))
     }
 
     /// The mean square of `weights` through `error`, against white noise of variance
@@ -221,6 +408,11 @@ mod tests {
             .collect();
         let mean_square = out.iter().map(|v| v * v).sum::<f64>() / out.len() as f64;
         mean_square / (white * weights.iter().map(|w| w * w).sum::<f64>())
+    }
+
+    /// The centres of every window of half width `h` over `n` samples.
+    fn every_row(n: usize, h: usize) -> Vec<usize> {
+        (h..n - h).collect()
     }
 
     #[test]
@@ -238,22 +430,40 @@ mod tests {
                 kernel_shares: None,
             };
             for (amplitude, hz) in [(0.05, 0.013), (0.5, 0.07), (5.0, 0.31)] {
-                let (error, speed) = quantised_sine(amplitude, hz, q, raw_dt, block);
+                // A sine turns at the same two positions every cycle, so what passes at its
+                // turns is one draw over where they fall on a step (on the middle sine 1.54
+                // to 2.77 of white noise's share over eight offsets): the model is the mean
+                // over them, and is compared with the mean over eight.
+                let offsets: Vec<f64> = (0..8).map(|k| k as f64 / 8.0 * q).collect();
+                let sines: Vec<_> = offsets
+                    .iter()
+                    .map(|&o| quantised_sine(amplitude, hz, q, raw_dt, block, o))
+                    .collect();
+                let (_, position, speed) = &sines[0];
                 for kernel in [sg::VELOCITY, sg::ACCELERATION, sg::POSITION] {
                     let w = &diff.weights[kernel];
-                    let h = diff.half;
-                    let model = kernel_shares(
+                    let model = trajectory_shares(
                         &[w],
-                        &speed[h..speed.len() - h],
+                        position,
+                        speed,
+                        &every_row(position.len(), diff.half),
                         quantisation,
                         raw_dt * block as f64,
-                    )[0];
-                    let measured = measured_share(w, &error, quantisation.white_variance_mm2());
-                    // Where the speed sweeps through the aliases (the middle sines), the
-                    // model sums the harmonics' powers where the sampled sawtooth's
-                    // interfere, and overstates what passes by up to half.
+                        true,
+                    )
+                    .expect("rows to sum")[0];
+                    let measured = sines
+                        .iter()
+                        .map(|(error, _, _)| {
+                            measured_share(w, error, quantisation.white_variance_mm2())
+                        })
+                        .sum::<f64>()
+                        / sines.len() as f64;
+                    // Summed along the sine, the speed sweeping through the aliases within a
+                    // window is followed (a share at each sample's steady speed overstated
+                    // the middle sines by up to half).
                     assert!(
-                        (model / measured).ln().abs() <= 1.6_f64.ln(),
+                        (model / measured).ln().abs() <= 1.1_f64.ln(),
                         "step {q} mm, sine {amplitude} mm at {hz} Hz, kernel {kernel}: model \
                          {model}, measured {measured}"
                     );
@@ -274,13 +484,14 @@ mod tests {
         let diff = Differentiator::new(43);
         let mut rng = rand::rngs::StdRng::seed_from_u64(3);
         let noise = Normal::new(0.0, 0.2 * q).unwrap();
-        let error: Vec<f64> = (0..400_000)
-            .map(|i| {
-                let x = 1.0 + speed * i as f64 * dt;
-                ((x + noise.sample(&mut rng)) / q).round() * q - x
-            })
+        let n = 400_000;
+        let position: Vec<f64> = (0..n).map(|i| 1.0 + speed * i as f64 * dt).collect();
+        let error: Vec<f64> = position
+            .iter()
+            .map(|x| ((x + noise.sample(&mut rng)) / q).round() * q - x)
             .collect();
-        let speeds = vec![speed; 1000];
+        let speeds = vec![speed; n];
+        let rows = every_row(n, diff.half);
         let with = |dither_steps: f64| Quantisation {
             step_mm: q,
             dither_steps,
@@ -291,8 +502,11 @@ mod tests {
         for kernel in [sg::POSITION, sg::VELOCITY, sg::ACCELERATION] {
             let w = &diff.weights[kernel];
             let measured = measured_share(w, &error, with(0.0).white_variance_mm2());
-            let model = kernel_shares(&[w], &speeds, with(0.2), dt)[0];
-            let noiseless = kernel_shares(&[w], &speeds, with(0.0), dt)[0];
+            let share = |dither: f64| {
+                trajectory_shares(&[w], &position, &speeds, &rows, with(dither), dt, true)
+                    .expect("rows to sum")[0]
+            };
+            let (model, noiseless) = (share(0.2), share(0.0));
             assert!(
                 (model / measured).ln().abs() <= 1.15_f64.ln(),
                 "kernel {kernel}: model {model}, measured {measured}"
@@ -302,6 +516,114 @@ mod tests {
                 (noiseless / measured).ln().abs() >= 2.0_f64.ln(),
                 "kernel {kernel}: noiseless model {noiseless}, measured {measured}"
             );
+        }
+    }
+
+    #[test]
+    fn a_rod_at_rest_passes_its_constant_error_through_the_position_kernel_alone() {
+        // At rest the error is one constant: the derivative kernels pass only the white
+        // remainder of the harmonics not summed (1.9 %), the position kernel the whole error,
+        // q^2 / 12 against white noise's q^2 / 12 sum w^2.
+        let diff = Differentiator::new(43);
+        let q = Quantisation {
+            step_mm: 0.01,
+            dither_steps: 0.0,
+            block: 1,
+            variance_scale: 1.0,
+            kernel_shares: None,
+        };
+        let n = 2000;
+        let position = vec![3.0; n];
+        let speed = vec![0.0; n];
+        let kernels: Vec<&[f64]> = (0..4).map(|k| &diff.weights[k][..]).collect();
+        let shares = trajectory_shares(
+            &kernels,
+            &position,
+            &speed,
+            &every_row(n, diff.half),
+            q,
+            0.01,
+            true,
+        )
+        .expect("rows to sum");
+        let tail =
+            1.0 - 6.0 / (PI * PI) * (1..=HARMONICS).map(|h| 1.0 / (h * h) as f64).sum::<f64>();
+        for k in [sg::VELOCITY, sg::ACCELERATION, sg::MOTION_VELOCITY] {
+            assert!((shares[k] - tail).abs() < 1e-6, "kernel {k}: {}", shares[k]);
+        }
+        let power: f64 = diff.weights[sg::POSITION].iter().map(|w| w * w).sum();
+        assert!(
+            (shares[sg::POSITION] / (1.0 / power) - 1.0).abs() < 0.02,
+            "position: {} against {}",
+            shares[sg::POSITION],
+            1.0 / power
+        );
+    }
+
+    #[test]
+    fn each_speed_class_takes_its_own_samples_shares() {
+        // Half the log creeps (0.02 steps a sample: the harmonics inside the band), half
+        // cruises (3.3 steps a sample): a sample of either takes its own half's shares, not
+        // their mean.
+        let diff = Differentiator::new(43);
+        let q = Quantisation {
+            step_mm: 0.006,
+            dither_steps: 0.0,
+            block: 1,
+            variance_scale: 1.0,
+            kernel_shares: None,
+        };
+        let (dt, n) = (0.01, 20_000);
+        let (slow, fast) = (0.02 * 0.006 / dt, 3.3 * 0.006 / dt);
+        let mut position = Vec::with_capacity(n);
+        let mut speed = Vec::with_capacity(n);
+        let mut x = 0.0;
+        for i in 0..n {
+            let v = if i < n / 2 { slow } else { fast };
+            x += v * dt;
+            position.push(x);
+            speed.push(v);
+        }
+        let kernels: [&[f64]; SHARE_KERNELS] = [
+            &diff.weights[0],
+            &diff.weights[1],
+            &diff.weights[2],
+            &diff.weights[3],
+            &diff.weights[1],
+        ];
+        // The rows whose windows lie wholly in one half.
+        let slow_rows: Vec<usize> = (diff.half..n / 2 - diff.half).collect();
+        let fast_rows: Vec<usize> = (n / 2 + diff.half..n - diff.half).collect();
+        let rows = [slow_rows.clone(), fast_rows.clone()].concat();
+        let row_speeds: Vec<f64> = rows.iter().map(|&r| speed[r]).collect();
+        let table = SpeedShares::new(&kernels, &position, &speed, &rows, &row_speeds, q, dt);
+        let own = |rows: &[usize]| {
+            trajectory_shares(&kernels, &position, &speed, rows, q, dt, false).expect("rows")
+        };
+        let (slow_own, fast_own) = (own(&slow_rows), own(&fast_rows));
+        for k in [sg::VELOCITY, sg::ACCELERATION] {
+            let (at_slow, at_fast) = (table.at(slow)[k], table.at(fast)[k]);
+            assert!(
+                (at_slow / slow_own[k] - 1.0).abs() < 0.05,
+                "{k}: {at_slow} {slow_own:?}"
+            );
+            assert!(
+                (at_fast / fast_own[k] - 1.0).abs() < 0.05,
+                "{k}: {at_fast} {fast_own:?}"
+            );
+            // The two differ by far more than the tolerance: the test tells them apart.
+            assert!(
+                (at_slow / at_fast).ln().abs() > 2.0_f64.ln(),
+                "{k}: {at_slow} {at_fast}"
+            );
+        }
+        // Samples take their class's shares; a class none of the log's samples fell in (here
+        // rest) takes the nearest one's.
+        let shares = RowShares::new(table, &[0.0, slow, fast]);
+        for k in 0..SHARE_KERNELS {
+            assert_eq!(shares.share(1, k), table.at(slow)[k]);
+            assert_eq!(shares.share(2, k), table.at(fast)[k]);
+            assert_eq!(shares.share(0, k), table.at(slow)[k]);
         }
     }
 }

@@ -63,6 +63,18 @@ pub fn quintic_smoother(half: usize) -> Vec<f64> {
     kernel(h as usize, &all, ORDER, 0)
 }
 
+/// `y` through a centred `kernel` of odd length, for the samples whose whole window lies
+/// inside the data (indices half .. n - half, as [`Differentiator::apply`]).
+pub fn smooth(y: &[f64], kernel: &[f64]) -> Vec<f64> {
+    let h = kernel.len() / 2;
+    if kernel.is_empty() || y.len() < 2 * h + 1 {
+        return Vec::new();
+    }
+    y.windows(2 * h + 1)
+        .map(|w| w.iter().zip(kernel).map(|(a, b)| a * b).sum())
+        .collect()
+}
+
 fn kernel(half: usize, offsets: &[i64], order: usize, deriv: usize) -> Vec<f64> {
     let scale = half.max(1) as f64;
     let a = DMatrix::from_fn(offsets.len(), order + 1, |i, j| {

@@ -477,7 +477,7 @@ fn fit_inertia_with_noise_uncertainty(
         Some(q) if q.kernel_shares.is_none() => {
             with_shares = SensorNoise {
                 position_quantisation: Some(Quantisation {
-                    kernel_shares: Some(quantisation_shares(log, noise, diff, q)),
+                    kernel_shares: Some(quantisation_shares(log, diff, q)),
                     ..q
                 }),
                 ..*noise
@@ -499,14 +499,18 @@ fn fit_inertia_with_noise_uncertainty(
 }
 
 /// Adds each parameter's change under the raised noise to its variance (see
-/// [`fit_with_noise_uncertainty`]).
+/// [`fit_with_noise_uncertainty`]). A parameter the raised noise leaves unidentifiable (its
+/// noise-corrected information no longer positive) is then indistinguishable from zero: its
+/// change is its whole value. (On an S-curve log read in 15.6 um steps at 100 Hz, m at a
+/// 0.31 s window was 0.0088 +- 0.0010 against a true 0.0030, and dropped at the noise's
+/// upper bound; the window choice took that window for its precision.)
 fn add_noise_uncertainty(id: &mut Identification, raised: &Estimates) {
     let names = id.covariance_parameters.clone();
     for p in Param::ALL {
-        let (Some(v), Some(s), Some(r)) = (id.get(p).value, id.get(p).std, raised.get(p).value)
-        else {
+        let (Some(v), Some(s)) = (id.get(p).value, id.get(p).std) else {
             continue;
         };
+        let r = raised.get(p).value.unwrap_or(0.0);
         let change = (r - v).abs();
         if !change.is_finite() || change == 0.0 {
             continue;
