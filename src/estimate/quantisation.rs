@@ -64,12 +64,6 @@ impl Quantisation {
 /// 6 / (pi^2 N) of its power, 1.9 %) are counted as white noise.
 pub const HARMONICS: usize = 32;
 
-/// At most this many of the rows asked for are summed, evenly spread over them: a row's
-/// share is a sum over its kernels' windows, and neighbouring rows' windows overlap, so the
-/// mean over a spread of rows is the mean over all of them to a few per cent at a bounded
-/// cost whatever the log's length.
-pub const SHARE_ROWS: usize = 1024;
-
 /// The shares, relative to white noise of the uniform error's variance, of the quantisation
 /// error's power that each of `kernels` (odd lengths, centred, unit sample spacing as in
 /// [`super::sg::Differentiator`]) passes at the fitted samples `rows`, on average, for a rod
@@ -85,8 +79,9 @@ pub const SHARE_ROWS: usize = 1024;
 /// within a window, as it does on sines, S-curves and a force-controlled rod, where a share
 /// worked out at each row's steady speed overstated what passed by up to 2.1 times.
 /// Rows whose windows reach beyond the trajectory, or where it is not finite, are skipped;
-/// at most [`SHARE_ROWS`] of the rest are summed where `spread`. None when no row is left,
-/// there are no kernels, or the step is not positive.
+/// every other is summed (a caller bounds the work by the rows it asks for:
+/// [`SpeedShares`]). None when no row is left, there are no kernels, or the step is not
+/// positive.
 pub fn trajectory_shares(
     kernels: &[&[f64]],
     position_mm: &[f64],
@@ -94,7 +89,6 @@ pub fn trajectory_shares(
     rows: &[usize],
     q: Quantisation,
     dt_s: f64,
-    spread: bool,
 ) -> Option<Vec<f64>> {
     let k_count = kernels.len();
     if !(q.step_mm > 0.0 && q.step_mm.is_finite()) || k_count == 0 {
@@ -113,11 +107,7 @@ pub fn trajectory_shares(
     if usable.is_empty() {
         return None;
     }
-    let picked = if spread {
-        spread_over(&usable, SHARE_ROWS)
-    } else {
-        usable
-    };
+    let picked = usable;
     let block = q.block.max(1);
     let b = block as f64;
     let raw_dt = dt_s / b;
@@ -296,8 +286,7 @@ impl SpeedShares {
                 continue;
             }
             let picked = spread_over(rows, CLASS_ROWS);
-            if let Some(at) =
-                trajectory_shares(kernels, position_mm, speed_mm_s, &picked, q, dt_s, false)
+            if let Some(at) = trajectory_shares(kernels, position_mm, speed_mm_s, &picked, q, dt_s)
             {
                 shares.table[c].copy_from_slice(&at);
                 known[c] = true;
@@ -446,10 +435,9 @@ mod tests {
                         &[w],
                         position,
                         speed,
-                        &every_row(position.len(), diff.half),
+                        &spread_over(&every_row(position.len(), diff.half), 1024),
                         quantisation,
                         raw_dt * block as f64,
-                        true,
                     )
                     .expect("rows to sum")[0];
                     let measured = sines
@@ -491,7 +479,7 @@ mod tests {
             .map(|x| ((x + noise.sample(&mut rng)) / q).round() * q - x)
             .collect();
         let speeds = vec![speed; n];
-        let rows = every_row(n, diff.half);
+        let rows = spread_over(&every_row(n, diff.half), 1024);
         let with = |dither_steps: f64| Quantisation {
             step_mm: q,
             dither_steps,
@@ -503,7 +491,7 @@ mod tests {
             let w = &diff.weights[kernel];
             let measured = measured_share(w, &error, with(0.0).white_variance_mm2());
             let share = |dither: f64| {
-                trajectory_shares(&[w], &position, &speeds, &rows, with(dither), dt, true)
+                trajectory_shares(&[w], &position, &speeds, &rows, with(dither), dt)
                     .expect("rows to sum")[0]
             };
             let (model, noiseless) = (share(0.2), share(0.0));
@@ -543,7 +531,6 @@ mod tests {
             &every_row(n, diff.half),
             q,
             0.01,
-            true,
         )
         .expect("rows to sum");
         let tail =
@@ -598,7 +585,7 @@ mod tests {
         let row_speeds: Vec<f64> = rows.iter().map(|&r| speed[r]).collect();
         let table = SpeedShares::new(&kernels, &position, &speed, &rows, &row_speeds, q, dt);
         let own = |rows: &[usize]| {
-            trajectory_shares(&kernels, &position, &speed, rows, q, dt, false).expect("rows")
+            trajectory_shares(&kernels, &position, &speed, rows, q, dt).expect("rows")
         };
         let (slow_own, fast_own) = (own(&slow_rows), own(&fast_rows));
         for k in [sg::VELOCITY, sg::ACCELERATION] {
