@@ -1735,7 +1735,7 @@ fn fit_regression(
     // A position read in steps: each kernel's noise is what it passes of the steps' error at
     // each row's speed, not white noise's ([`RowShares`]); the rows' variances are white
     // noise's, times their shares. Which samples move is judged against the motion
-    // velocity's share over the log's moving samples ([`quantisation_shares`]).
+    // velocity's mean share over the rows beyond its band ([`row_shares`]).
     let (variance_of, parallel_noise, shares) = match noise.position_quantisation {
         Some(q) => {
             let white_band = 3.0

@@ -217,7 +217,9 @@ fn spread_over(rows: &[usize], count: usize) -> Vec<usize> {
     }
     let golden = (5.0_f64.sqrt() - 1.0) / 2.0;
     let mut picked: Vec<usize> = (0..count)
-        .map(|k| rows[((k as f64 * golden).fract() * rows.len() as f64) as usize % rows.len()])
+        .map(|k| {
+            rows[(((k as f64 * golden).fract() * rows.len() as f64) as usize).min(rows.len() - 1)]
+        })
         .collect();
     picked.sort_unstable();
     picked
