@@ -359,11 +359,8 @@ proptest! {
             &diff.weights[4],
         ];
         let q = Quantisation {
-            step_mm: step,
-            dither_steps: dither,
             block,
-            variance_scale: 1.0,
-            kernel_shares: None,
+            ..Quantisation::new(step, dither)
         };
         let rows: Vec<usize> = (0..samples).collect();
         let table = SpeedShares::new(&kernels, &position, &speeds, &rows, &speeds, q, dt);

@@ -612,13 +612,10 @@ impl GivenNoise {
         // kernels pass of the steps' error from the speeds the log moves at, to within
         // [`QUANTISATION_MODEL_RELATIVE_STD`].
         let position_quantisation = match (position_origin, log) {
-            (NoiseOrigin::Log, Some(l)) => l.position.quantum.map(|step| Quantisation {
-                step_mm: step,
-                dither_steps: l.position.dither_steps,
-                block: 1,
-                variance_scale: 1.0,
-                kernel_shares: None,
-            }),
+            (NoiseOrigin::Log, Some(l)) => l
+                .position
+                .quantum
+                .map(|step| Quantisation::new(step, l.position.dither_steps)),
             _ => None,
         };
         let position_variance_relative_std = match (position_origin, log) {

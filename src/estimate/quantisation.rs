@@ -52,6 +52,19 @@ pub struct Quantisation {
 }
 
 impl Quantisation {
+    /// A position read in steps of `step_mm` with analog noise of `dither_steps` steps before
+    /// them, at the logged samples (a block of 1), its variance unscaled, its kernels' shares
+    /// not yet worked out.
+    pub fn new(step_mm: f64, dither_steps: f64) -> Quantisation {
+        Quantisation {
+            step_mm,
+            dither_steps,
+            block: 1,
+            variance_scale: 1.0,
+            kernel_shares: None,
+        }
+    }
+
     /// The variance (mm^2, per sample identification fits) of white noise with the uniform
     /// error's power, q^2 / 12 of a logged sample averaged over the block: the reference the
     /// kernels' shares are taken against.
@@ -414,11 +427,8 @@ mod tests {
         let diff = Differentiator::new(43);
         for (q, raw_dt, block) in [(0.002, 0.001, 10), (0.007, 0.005, 2)] {
             let quantisation = Quantisation {
-                step_mm: q,
-                dither_steps: 0.0,
                 block,
-                variance_scale: 1.0,
-                kernel_shares: None,
+                ..Quantisation::new(q, 0.0)
             };
             for (amplitude, hz) in [(0.05, 0.013), (0.5, 0.07), (5.0, 0.31)] {
                 // A sine turns at the same two positions every cycle, so what passes at its
@@ -482,13 +492,7 @@ mod tests {
             .collect();
         let speeds = vec![speed; n];
         let rows = spread_over(&every_row(n, diff.half), 1024);
-        let with = |dither_steps: f64| Quantisation {
-            step_mm: q,
-            dither_steps,
-            block: 1,
-            variance_scale: 1.0,
-            kernel_shares: None,
-        };
+        let with = |dither_steps: f64| Quantisation::new(q, dither_steps);
         for kernel in [sg::POSITION, sg::VELOCITY, sg::ACCELERATION] {
             let w = &diff.weights[kernel];
             let measured = measured_share(w, &error, with(0.0).white_variance_mm2());
@@ -515,13 +519,7 @@ mod tests {
         // remainder of the harmonics not summed (1.9 %), the position kernel the whole error,
         // q^2 / 12 against white noise's q^2 / 12 sum w^2.
         let diff = Differentiator::new(43);
-        let q = Quantisation {
-            step_mm: 0.01,
-            dither_steps: 0.0,
-            block: 1,
-            variance_scale: 1.0,
-            kernel_shares: None,
-        };
+        let q = Quantisation::new(0.01, 0.0);
         let n = 2000;
         let position = vec![3.0; n];
         let speed = vec![0.0; n];
@@ -555,13 +553,7 @@ mod tests {
         // cruises (3.3 steps a sample): a sample of either takes its own half's shares, not
         // their mean.
         let diff = Differentiator::new(43);
-        let q = Quantisation {
-            step_mm: 0.006,
-            dither_steps: 0.0,
-            block: 1,
-            variance_scale: 1.0,
-            kernel_shares: None,
-        };
+        let q = Quantisation::new(0.006, 0.0);
         let (dt, n) = (0.01, 20_000);
         let (slow, fast) = (0.02 * 0.006 / dt, 3.3 * 0.006 / dt);
         let mut position = Vec::with_capacity(n);
