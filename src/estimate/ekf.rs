@@ -159,6 +159,11 @@ pub struct EkfSettings {
     pub outlier_sigmas: f64,
     /// This many outliers in a row stop the filter as diverged.
     pub max_outliers_in_a_row: usize,
+    /// Where identification does not resolve the inertia and the filter with M held at its
+    /// start lost the motion: that start (N s^2/mm). The filter then estimates M only to keep
+    /// its model whole; its M is not reported ([`EkfSettings::reports`]). `None`: M is held,
+    /// or estimated and reported.
+    pub m_nuisance_from: Option<f64>,
 }
 
 /// Why the filter stopped.
@@ -201,6 +206,13 @@ pub struct StepInfo {
 }
 
 impl EkfSettings {
+    /// Whether the filter reports its own estimate of state `k`: it is neither held nor an
+    /// inertia carried free only to keep the model whole ([`EkfSettings::m_nuisance_from`]).
+    pub fn reports(&self, k: usize) -> bool {
+        let nuisance = k == idx::M && self.m_nuisance_from.is_some();
+        !(self.holds(k) || nuisance)
+    }
+
     /// Whether the filter holds state `k` at its initial value: no initial variance and no
     /// process noise (an M or d2 identification does not resolve).
     pub fn holds(&self, k: usize) -> bool {
@@ -1112,6 +1124,7 @@ pub fn default_settings(
         d_floor: 0.0,
         outlier_sigmas: 8.0,
         max_outliers_in_a_row: 50,
+        m_nuisance_from: None,
     }
 }
 

@@ -456,7 +456,7 @@ pub fn estimate_json(est: &EstimateRun) -> Value {
     let fs = run.offset_filter.std();
     // A held state that identification does not resolve has no standard deviation (null),
     // not a zero one.
-    let std_of = |k: usize| (!(settings.holds(k) && sd[k] == 0.0)).then_some(sd[k]);
+    let std_of = |k: usize| (settings.reports(k) || sd[k] != 0.0).then_some(sd[k]);
     json!({
         "final": {
             "k2_per_mm": z[idx::K2], "k2_per_mm_std": sd[idx::K2],
@@ -487,10 +487,11 @@ pub fn estimate_json(est: &EstimateRun) -> Value {
     })
 }
 
-/// The states the filter held at their initial value (no initial variance, no process noise).
+/// The states the filter does not report: held at their initial value (no initial variance,
+/// no process noise), or an inertia carried free only to keep its model whole.
 fn held_states(settings: &EkfSettings) -> Vec<&'static str> {
     (0..8)
-        .filter(|&i| settings.holds(i))
+        .filter(|&i| !settings.reports(i))
         .map(|i| STATE_NAMES[i])
         .collect()
 }
@@ -502,6 +503,11 @@ pub fn format_consistency(est: &EstimateRun) -> String {
     let held = held_states(&est.settings);
     for name in held {
         let why = match name {
+            "m_n_s2_per_mm" if est.settings.m_nuisance_from.is_some() => {
+                "identification does not resolve it; the filter carried it free to keep its \
+                 model whole (see the note), and it is reported at its start without a standard \
+                 deviation"
+            }
             "m_n_s2_per_mm" => {
                 "identification does not resolve it; held at its value, reported with its \
                  standard deviation"
@@ -620,10 +626,15 @@ pub fn format_estimate(est: &EstimateRun) -> String {
         ("sigma", idx::SIGMA, "N/mm (last sample)"),
         ("D", idx::D, "N s/mm (last sample)"),
     ] {
-        if est.settings.holds(k) && sd[k] == 0.0 {
+        if !est.settings.reports(k) && sd[k] == 0.0 {
+            let how = if est.settings.holds(k) {
+                "held, not estimated"
+            } else {
+                "its start; not estimated"
+            };
             let _ = writeln!(
                 s,
-                "  {name:<5} = {:>12.5e} {unit} (held, not estimated: no standard deviation)",
+                "  {name:<5} = {:>12.5e} {unit} ({how}: no standard deviation)",
                 z[k]
             );
         } else {
