@@ -159,10 +159,10 @@ pub struct EkfSettings {
     pub outlier_sigmas: f64,
     /// This many outliers in a row stop the filter as diverged.
     pub max_outliers_in_a_row: usize,
-    /// Where identification does not resolve the inertia and the filter with M held at its
-    /// start lost the motion: that start (N s^2/mm). The filter then estimates M only to keep
-    /// its model whole; its M is not reported ([`EkfSettings::reports`]). `None`: M is held,
-    /// or estimated and reported.
+    /// Where identification does not resolve the inertia and left transients out (the
+    /// inertia's force was in them): M's start (N s^2/mm). The filter then estimates M only to
+    /// keep its model whole; its M is not reported ([`EkfSettings::reports`]). `None`: M is
+    /// held, or estimated and reported.
     pub m_nuisance_from: Option<f64>,
 }
 
@@ -1009,7 +1009,8 @@ impl EkfInit {
         // An inertia that identification does not resolve (standard deviation above half the
         // value) is held, not estimated: the filter cannot resolve it either, and a wide prior
         // on it lets the prediction go unstable. It is held at identification's value (at least
-        // zero: the pipeline's floor applies).
+        // zero: the pipeline's floor applies), unless the pipeline carries it free as a
+        // nuisance (`EkfSettings::m_nuisance_from`).
         let m = match g(Param::M) {
             Some((v, s)) if v > 0.0 && s < 0.5 * v => (v, s.max(0.1 * v)),
             Some((v, _)) => (v.max(0.0), 0.0),

@@ -504,9 +504,9 @@ pub fn format_consistency(est: &EstimateRun) -> String {
     for name in held {
         let why = match name {
             "m_n_s2_per_mm" if est.settings.m_nuisance_from.is_some() => {
-                "identification does not resolve it; the filter carried it free to keep its \
-                 model whole (see the note), and it is reported at its start without a standard \
-                 deviation"
+                "identification does not resolve it, having left out as transients the samples \
+                 that carry the inertia's force; the filter carried it free to keep its model \
+                 whole, and it is reported at its start without a standard deviation"
             }
             "m_n_s2_per_mm" => {
                 "identification does not resolve it; held at its value, reported with its \

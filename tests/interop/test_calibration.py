@@ -608,27 +608,33 @@ def test_a_force_step_the_default_force_rate_smears_is_recovered_over_a_shorter_
         assert abs(f[key] - truth) < 3.0 * f[f"{key}_std"], (key, f[key], f[f"{key}_std"], truth)
 
 
-def test_an_inertia_identification_gives_up_is_carried_free_when_holding_it_loses_the_motion(tmp_path):
-    """Sweep draw 39 (analog, 100 Hz): a servo's ramp-holds of a heavy transmission (m 0.243,
-    d0 1.92 N). Its inertia went with the velocity steps that identification leaves out as
-    transients, so m is not identifiable, and the filter held M at its start, 0.012, the least
-    it integrates stably. That model moves the rod twenty times as fast as it does: the filter
-    diverged, again with its spreads widened and its force rate shortened, and only the loose
-    filter converged, flagged not consistent (innovations at 0.19 of their variance), exit 1.
-    M is now carried free from that start before the loose filter: the filter converges,
-    consistent (exit 0), says how, reports M as not estimated, and k2, d2, F0 and d0 come out
-    within three of their standard deviations (F0 was at -3.7 before its standard deviation
-    took its disagreement with identification)."""
-    tr, log = sweep_log(tmp_path, 39)
+@pytest.mark.parametrize("i", [29, 39, 64, 79])
+def test_an_inertia_identification_gives_up_with_a_servos_transients_is_carried_free(tmp_path, i):
+    """Sweep draws 29 (m 0.203, d0 3.29 N, 500 Hz), 39 (m 0.243, d0 1.92 N, 100 Hz), 64 (m
+    0.0083, d0 1.73 N, 1 kHz) and 79 (m 0.362, d0 3.73 N, 500 Hz), analog: a servo's
+    ramp-holds. The
+    inertia's force is in the velocity steps that identification leaves out as transients,
+    so m is not identifiable there, and the filter held M at its start, the least it
+    integrates stably (0.0002 to 0.012): a model whose rod moves many times faster than the
+    rod. It was flagged not consistent on 29, 64 and 79 with k2 -2.9, +7.2 and -3.4 % off,
+    and diverged on 39 until the loose filter followed it (innovations at 0.19 of their
+    variance, flagged). M is now carried free from that start and not reported: the filter
+    is consistent (exit 0) without a recovery, M is reported as not estimated, and k2 (within
+    1 %), d2, F0 and d0 come out within three of their standard deviations. On 39 F0 had also
+    been at -3.7 before its standard deviation took its disagreement with identification."""
+    tr, log = sweep_log(tmp_path, i)
     est = camspring("estimate", log, "--json", "-o", tmp_path / "est.csv")
-    assert est.returncode == 0, est.stderr
+    assert est.returncode == 0, est.stderr + est.stdout[-3000:]
     j = json.loads(est.stdout)
-    assert "the inertia, which identification does not resolve, carried free" in j["recovery"], j["recovery"]
+    assert j["recovery"] is None, j["recovery"]
     assert j["consistency"]["consistent"], j["consistency"]
     assert "m_n_s2_per_mm" in j["held"] and j["final"]["m_n_s2_per_mm_std"] is None, j["final"]
+    assert j["settings"]["m_nuisance_from"] is not None, j["settings"]
     f = j["final"]
+    assert abs(f["k2_per_mm"] / tr.k2 - 1.0) < 0.01, (f["k2_per_mm"], tr.k2)
     for key, truth in [("k2_per_mm", tr.k2), ("d2_n_s3_per_mm3", tr.d2), ("f0_n", tr.f0), ("d0_n", tr.d0)]:
-        assert abs(f[key] - truth) < 3.0 * f[f"{key}_std"], (key, f[key], f[f"{key}_std"], truth)
+        if f.get(f"{key}_std"):
+            assert abs(f[key] - truth) < 3.0 * f[f"{key}_std"], (key, f[key], f[f"{key}_std"], truth)
 
 
 @pytest.mark.parametrize("i", [45, 50])
