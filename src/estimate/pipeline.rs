@@ -1744,18 +1744,22 @@ fn identified_damping(run: &EkfRun, id: &Identification) -> Option<(f64, f64)> {
 fn widen_offsets(run: &mut EkfRun, id: &Identification, identified_s: f64) {
     use super::identify::Param;
     let scale = (identified_s / ekf::OFFSET_MEMORY_S).max(1.0).sqrt();
-    let std = run.offset_filter.std();
     for (k, p) in [(0, Param::F0), (1, Param::D0)] {
-        let Some(s_id) = id.get(p).std else {
-            continue;
-        };
-        let floor = s_id * scale;
-        if std[k] > 0.0 && std[k] < floor && floor.is_finite() {
-            let f = floor / std[k];
-            for j in 0..2 {
-                run.offset_filter.p[(k, j)] *= f;
-                run.offset_filter.p[(j, k)] *= f;
-            }
+        if let Some(s_id) = id.get(p).std {
+            widen_offset(run, k, s_id * scale);
+        }
+    }
+}
+
+/// Raises the parallel filter's standard deviation of offset `k` (0: F0, 1: d0) to `floor` if
+/// it is below, scaling its row and column of the covariance, so that the correlation stays.
+fn widen_offset(run: &mut EkfRun, k: usize, floor: f64) {
+    let std = run.offset_filter.std()[k];
+    if std > 0.0 && std < floor && floor.is_finite() {
+        let f = floor / std;
+        for j in 0..2 {
+            run.offset_filter.p[(k, j)] *= f;
+            run.offset_filter.p[(j, k)] *= f;
         }
     }
 }
@@ -1807,15 +1811,7 @@ fn widen_to_disagreement(run: &mut EkfRun, id: &Identification) {
             continue;
         };
         let d2 = (run.offset_filter.theta[k] - v).powi(2);
-        let floor = (0.5 * d2).max(d2 - s_id * s_id).sqrt();
-        let std = run.offset_filter.std()[k];
-        if std > 0.0 && std < floor && floor.is_finite() {
-            let f = floor / std;
-            for j in 0..2 {
-                run.offset_filter.p[(k, j)] *= f;
-                run.offset_filter.p[(j, k)] *= f;
-            }
-        }
+        widen_offset(run, k, (0.5 * d2).max(d2 - s_id * s_id).sqrt());
     }
 }
 
