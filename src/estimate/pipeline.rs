@@ -1211,9 +1211,10 @@ where
                 ekf::idx::K2,
                 ekf::idx::D2,
             ] {
-                // (A nuisance inertia's spread is wide already: 80 times its start diverged
-                // where ten times converged, [`NUISANCE_INERTIA_SPREAD`].)
-                if !(i == ekf::idx::M && settings.m_nuisance_from.is_some()) {
+                // Only what the filter reports: a held state has no spread to widen, and a
+                // nuisance inertia's is wide already (80 times its start diverged where ten
+                // times converged, [`NUISANCE_INERTIA_SPREAD`]).
+                if settings.reports(i) {
                     wide.p0_std[i] *= 10.0;
                 }
             }
