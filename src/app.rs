@@ -10,6 +10,7 @@ use crate::error::{Error, Result};
 use crate::estimate::pipeline::{
     estimate, EstimateOptions, EstimateRun, PositionOffset, StateName,
 };
+use crate::estimate::retime::ForceDelay;
 use crate::export::{write_atomic, write_design, ExportError};
 use crate::model::{ExpLaw, ForceLaw, Spec};
 use crate::outputs::{plan, DesignSummary};
@@ -453,16 +454,32 @@ pub fn run_identify(
     sampling_tolerance: f64,
     noise: &crate::estimate::noise::GivenNoise,
     window_s: Option<f64>,
+    force_delay: ForceDelay,
 ) -> Result<IdentifyRun> {
+    use crate::estimate::retime::{fit_force_delay, retime_reduced, ForceDelayFit};
     let surveyed = survey_log_file(log_path, map, sampling_tolerance, f64::INFINITY)?;
-    let noise = noise.resolve(surveyed.noise.as_ref());
+    let mut noise = noise.resolve(surveyed.noise.as_ref());
     warn_noise(log_path, &noise);
-    let identification =
-        crate::estimate::identify::identify_reduced(&surveyed.reduced, &noise.noise, window_s)?;
+    let delay = match force_delay {
+        ForceDelay::None => None,
+        ForceDelay::Seconds(s) => Some(ForceDelayFit::given(s)),
+        ForceDelay::Auto => Some(fit_force_delay(&surveyed.reduced, &noise.noise, window_s)?),
+    };
+    let identification = match &delay {
+        None => {
+            crate::estimate::identify::identify_reduced(&surveyed.reduced, &noise.noise, window_s)?
+        }
+        Some(d) => {
+            let (reduced, timed) = retime_reduced(&surveyed.reduced, &noise.noise, d.delay_s);
+            noise.noise = timed;
+            crate::estimate::identify::identify_reduced(&reduced, &noise.noise, window_s)?
+        }
+    };
     Ok(IdentifyRun {
         identification,
         sample_rate_hz: 1.0 / surveyed.dt_s,
         noise,
+        force_delay: delay,
     })
 }
 
@@ -475,6 +492,8 @@ pub struct IdentifyRun {
     pub sample_rate_hz: f64,
     /// The sensor noise it weighted with, and where it came from.
     pub noise: crate::estimate::noise::ResolvedNoise,
+    /// The force channel's delay the log was re-timed by, when it was.
+    pub force_delay: Option<crate::estimate::retime::ForceDelayFit>,
 }
 
 /// Prints the warnings of a run's sensor noise (a given variance the log contradicts).

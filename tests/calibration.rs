@@ -200,7 +200,7 @@ fn poor_excitation_names_the_parameters_this_log_cannot_identify() {
         ]
     );
     let noise = camspring::estimate::noise::GivenNoise::from(SensorNoise::default()).resolve(None);
-    let text = camspring::render::calibration::format_identification(&id, &noise);
+    let text = camspring::render::calibration::format_identification(&id, &noise, None);
     assert!(
         text.contains("not identifiable (poor excitation): d0_n, d2_n_s3_per_mm3, m_n_s2_per_mm"),
         "{text}"

@@ -510,6 +510,17 @@ pub enum Regression {
 /// Why identification failed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum IdentifyError {
+    /// Produced by [`super::retime::fit_force_delay`] when the fit keeps improving up to the
+    /// edge of its search.
+    #[error(
+        "the fit keeps improving as the force is re-timed up to the search's limit of \
+         {limit_s:.3} s either way: the force channel's delay lies beyond it, or the model does \
+         not fit this log for another reason; give the delay with --force-delay, e.g. 0.3s"
+    )]
+    ForceDelayBeyondSearch {
+        /// The search's limit (s).
+        limit_s: f64,
+    },
     /// Produced by [`identify`] when the log does not move the spring enough.
     #[error(
         "the filtered position varies by only {range_mm:.4} mm (position noise {noise_mm:.4} mm): this log \

@@ -16,6 +16,7 @@ pub mod log;
 pub mod noise;
 pub mod pipeline;
 pub mod quantisation;
+pub mod retime;
 pub mod sg;
 pub mod sim;
 pub mod twin;

@@ -12,6 +12,7 @@ use crate::estimate::identify::{
 };
 use crate::estimate::noise::{NoiseModel, NoiseOrigin, ResolvedNoise};
 use crate::estimate::pipeline::EstimateRun;
+use crate::estimate::retime::ForceDelayFit;
 use crate::verdict::validate::{spring_force_n, CurveValidation, Validation};
 
 /// `camspring noise --json`.
@@ -147,6 +148,7 @@ pub fn identification_json(
     id: &Identification,
     noise: &ResolvedNoise,
     sample_rate_hz: f64,
+    force_delay: Option<&ForceDelayFit>,
 ) -> Value {
     let mut params = Map::new();
     for (p, e) in id.parameters.iter() {
@@ -190,6 +192,7 @@ pub fn identification_json(
             "reasons": id.adequacy.reasons,
         },
         "noise": sensor_noise_json(noise),
+        "force_delay": force_delay,
     })
 }
 
@@ -255,8 +258,36 @@ pub fn format_sensor_noise(noise: &ResolvedNoise) -> String {
     s
 }
 
+/// The line saying how the force was re-timed.
+pub fn force_delay_line(d: &ForceDelayFit) -> String {
+    let late = if d.delay_s >= 0.0 { "after" } else { "before" };
+    match (d.fitted, d.std_s) {
+        (true, Some(std)) => format!(
+            "  force re-timed: read {:.2} +- {:.2} ms {late} the position (fitted over {} \
+             delays, window held at {:.3} s)\n",
+            d.delay_s.abs() * 1e3,
+            std * 1e3,
+            d.trials.len(),
+            d.window_s.unwrap_or(f64::NAN)
+        ),
+        (true, None) => format!(
+            "  force re-timed: read {:.2} ms {late} the position (fitted; the profile has no \
+             curvature there, so its uncertainty is unknown)\n",
+            d.delay_s.abs() * 1e3
+        ),
+        (false, _) => format!(
+            "  force re-timed: read {:.2} ms {late} the position (as given)\n",
+            d.delay_s.abs() * 1e3
+        ),
+    }
+}
+
 /// The text summary of `camspring identify`.
-pub fn format_identification(id: &Identification, noise: &ResolvedNoise) -> String {
+pub fn format_identification(
+    id: &Identification,
+    noise: &ResolvedNoise,
+    force_delay: Option<&ForceDelayFit>,
+) -> String {
     let units = [
         ("m", "N s^2/mm"),
         ("d0", "N"),
@@ -291,6 +322,9 @@ pub fn format_identification(id: &Identification, noise: &ResolvedNoise) -> Stri
                 ""
             }
         );
+    }
+    if let Some(d) = force_delay {
+        s.push_str(&force_delay_line(d));
     }
     if let Some(problem) = id.adequacy.problem() {
         let _ = writeln!(

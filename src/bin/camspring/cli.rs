@@ -5,6 +5,7 @@
 use std::path::PathBuf;
 
 use camspring::estimate::pipeline::PositionOffset;
+use camspring::estimate::retime::ForceDelay;
 use clap::{Parser, Subcommand, ValueEnum};
 
 use camspring::app::InitSource;
@@ -209,6 +210,7 @@ pub enum Command {
     ///   camspring identify out/paper/calib.csv
     ///   camspring identify calib.csv --noise noise.json --json
     ///   camspring identify rig.csv --time t:ms --force F:lbf --position x:in
+    ///   camspring identify rig.csv --force-delay auto   # a load cell read late
     #[command(verbatim_doc_comment)]
     Identify {
         /// Calibration log (CSV with a header).
@@ -216,6 +218,11 @@ pub enum Command {
         /// Print the result as JSON on stdout.
         #[arg(long)]
         json: bool,
+        /// How late the force is read after the position: none (read together), a duration such
+        /// as 10ms (negative when the force is read first), or auto (fitted by identification).
+        /// The force is re-timed to its position's instant (identify only, for now).
+        #[arg(long, value_name = "auto|DURATION", default_value = "none", value_parser = force_delay, allow_hyphen_values = true)]
+        force_delay: ForceDelay,
         #[command(flatten)]
         sensors: Sensors,
         #[command(flatten)]
@@ -489,6 +496,29 @@ pub struct Sensors {
     /// Savitzky-Golay window, e.g. 0.8s (default: chosen from the log by the balancing principle).
     #[arg(long, value_parser = duration)]
     pub window: Option<f64>,
+}
+
+fn force_delay(text: &str) -> Result<ForceDelay, String> {
+    use camspring::estimate::retime::MAX_FORCE_DELAY_S;
+    match text.trim() {
+        "none" => Ok(ForceDelay::None),
+        "auto" => Ok(ForceDelay::Auto),
+        t => {
+            let s = camspring::units::parse_quantity(t, camspring::units::Dimension::Time)
+                .map_err(|e| {
+                    format!("\"{t}\": expected auto, none or a duration such as 10ms ({e})")
+                })?;
+            if s.abs() > MAX_FORCE_DELAY_S {
+                return Err(format!(
+                    "\"{t}\": a force read {:.3} s from its position; expected at most \
+                     {MAX_FORCE_DELAY_S} s either way (a channel scan or a converter's filter \
+                     delays by milliseconds)",
+                    s.abs()
+                ));
+            }
+            Ok(ForceDelay::Seconds(s))
+        }
+    }
 }
 
 /// EKF options.

@@ -515,13 +515,21 @@ fn main() -> ExitCode {
         Command::Identify {
             log,
             json,
+            force_delay,
             sensors: s,
             columns: c,
         } => emit(
             (|| {
                 let map = columns(&c)?;
                 let sensor = sensors(&s)?;
-                let run = run_identify(&log, &map, c.sampling_tolerance, &sensor, s.window)?;
+                let run = run_identify(
+                    &log,
+                    &map,
+                    c.sampling_tolerance,
+                    &sensor,
+                    s.window,
+                    force_delay,
+                )?;
                 let id = &run.identification;
                 let code = if id.adequacy.status == FitStatus::DoesNotFit {
                     EXIT_CHECK_FAILED
@@ -529,8 +537,13 @@ fn main() -> ExitCode {
                     EXIT_OK
                 };
                 Ok(Report::of_checks(
-                    format_identification(id, &run.noise),
-                    to_json(&identification_json(id, &run.noise, run.sample_rate_hz))?,
+                    format_identification(id, &run.noise, run.force_delay.as_ref()),
+                    to_json(&identification_json(
+                        id,
+                        &run.noise,
+                        run.sample_rate_hz,
+                        run.force_delay.as_ref(),
+                    ))?,
                     code,
                 ))
             })(),

@@ -1,0 +1,607 @@
+//! Re-timing the force channel of a log whose load cell is read at another instant than its
+//! encoder: channels scanned one after the other, or a converter's filter delay.
+//!
+//! A force read `delay` late (the reading at time t is the force at t - `delay`) is brought
+//! back to its position's instant: the force at row k becomes the force read at the
+//! fractional row k + `delay`/dt. A whole number of rows is an exact re-pairing of the
+//! readings; a fraction of a row is a band-limited interpolation by a Kaiser-windowed sinc of
+//! [`KERNEL_TAPS`] taps (flat within 1 % up to 0.78 of the Nyquist frequency, far above any
+//! motion a spring rig makes). The rows at the log's ends that lack a partner are left out.
+//! The interpolation passes white force noise with the variance factor
+//! [`noise_variance_factor`] (0.86 half-way between rows, 1 on a row), which identification
+//! weights with.
+
+use std::collections::VecDeque;
+
+use serde::Serialize;
+
+use super::identify::{identify_reduced, IdentifyError, ReducedLog, SensorNoise};
+use super::log::{CalibrationLog, LogError, Sample};
+
+/// How the force channel's delay behind the position is set.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum ForceDelay {
+    /// Read together (as logged).
+    #[default]
+    None,
+    /// Given (s; positive when the force is read late).
+    Seconds(f64),
+    /// Fitted by identification ([`fit_force_delay`]).
+    Auto,
+}
+
+/// One delay the profile of [`fit_force_delay`] tried.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct DelayTrial {
+    /// The delay tried (s).
+    pub delay_s: f64,
+    /// Identification's reduced chi-square with it (None where identification failed).
+    pub reduced_chi2: Option<f64>,
+}
+
+/// The force channel's delay behind the position, as applied.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ForceDelayFit {
+    /// The delay (s; positive when the force is read late).
+    pub delay_s: f64,
+    /// Its standard deviation (s) where it was fitted.
+    pub std_s: Option<f64>,
+    /// Whether it was fitted (else given).
+    pub fitted: bool,
+    /// The filter window (s) the profile held fixed, where fitted.
+    pub window_s: Option<f64>,
+    /// The delays the profile tried, in the order tried.
+    pub trials: Vec<DelayTrial>,
+}
+
+impl ForceDelayFit {
+    /// A delay as given.
+    pub fn given(delay_s: f64) -> ForceDelayFit {
+        ForceDelayFit {
+            delay_s,
+            std_s: None,
+            fitted: false,
+            window_s: None,
+            trials: Vec::new(),
+        }
+    }
+}
+
+/// How far (s) either side of zero [`fit_force_delay`] searches.
+pub const SEARCH_S: f64 = 0.25;
+
+/// The standard deviation (rows) of the fraction of a row the parabola gives: a uniform error
+/// over a row, 1/sqrt(12).
+pub const ROW_RESOLUTION: f64 = 0.288_675_134_594_812_9;
+
+/// The fewest rows either side of zero [`fit_force_delay`] searches.
+const SEARCH_ROWS_MIN: i64 = 5;
+
+/// The force channel's delay behind the position, fitted by identification: the delay
+/// (in rows of `reduced`) that brings identification's reduced chi-square, with the filter
+/// window held, to its least value.
+///
+/// 1. The window is the one chosen without a delay (or the given one), held fixed while
+///    delays are compared: a window chosen anew for each delay hides part of it (the chooser
+///    trades the delay's misfit against the filter's).
+/// 2. Every whole-row delay within [`SEARCH_S`] (at least [`SEARCH_ROWS_MIN`] rows) either
+///    way is tried, each an exact re-pairing of the readings; a least value at the search's
+///    edge is an error.
+/// 3. Where the window was chosen, it is chosen again on the log re-timed by the best whole
+///    row (a log read with a large delay chooses a poor one), and the rows around the best
+///    are tried again with it.
+/// 4. The fraction of a row: the vertex of the parabola through the best row and its
+///    neighbours. Interpolated delays are not compared: the interpolation lowers the force
+///    noise between rows (by up to 14 %), which moves the reduced chi-square more than a
+///    fraction of a row of delay does (on the independent rig's multisine at 100 Hz, a 10 ms
+///    delay profiled through interpolated ones had its least chi-square half a row off).
+/// 5. The standard deviation: the profile's, where the total chi-square rises by the fit's
+///    reduced chi-square (at least 1), its variance scaled by [`correlation_inflation`], with
+///    [`ROW_RESOLUTION`] of a row added in quadrature.
+pub fn fit_force_delay(
+    reduced: &ReducedLog,
+    noise: &SensorNoise,
+    window_s: Option<f64>,
+) -> Result<ForceDelayFit, IdentifyError> {
+    use rayon::prelude::*;
+    let dt = reduced.log.dt_s();
+    let first = identify_reduced(reduced, noise, window_s)?;
+    let mut window = window_s.unwrap_or(first.sg_window_s);
+    let limit = ((SEARCH_S / dt).ceil() as i64).max(SEARCH_ROWS_MIN);
+    let profile = |rows: f64, window: f64| -> Option<(f64, usize)> {
+        let (log, noise) = retime_reduced(reduced, noise, rows * dt);
+        identify_reduced(&log, &noise, Some(window))
+            .ok()
+            .filter(|id| id.reduced_chi2.is_finite())
+            .map(|id| (id.reduced_chi2, id.dynamic_samples))
+    };
+    let value = |r: Option<(f64, usize)>| r.map_or(f64::INFINITY, |r| r.0);
+    let mut trials: Vec<DelayTrial> = Vec::new();
+    let scan = |rows: Vec<i64>, window: f64, trials: &mut Vec<DelayTrial>| -> (i64, f64) {
+        let found: Vec<(i64, Option<(f64, usize)>)> = rows
+            .into_par_iter()
+            .map(|d| (d, profile(d as f64, window)))
+            .collect();
+        trials.extend(found.iter().map(|(d, r)| DelayTrial {
+            delay_s: *d as f64 * dt,
+            reduced_chi2: r.map(|r| r.0),
+        }));
+        found
+            .iter()
+            .map(|(d, r)| (*d, value(*r)))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .unwrap_or((0, f64::INFINITY))
+    };
+    let beyond = || IdentifyError::ForceDelayBeyondSearch {
+        limit_s: limit as f64 * dt,
+    };
+    let (mut best, least) = scan((-limit..=limit).collect(), window, &mut trials);
+    if !least.is_finite() {
+        // No delay gives a fit: identification's own error says why.
+        identify_reduced(reduced, noise, Some(window))?;
+    }
+    if best.abs() >= limit {
+        return Err(beyond());
+    }
+    if window_s.is_none() && best != 0 {
+        let (log, timed) = retime_reduced(reduced, noise, best as f64 * dt);
+        let chosen = identify_reduced(&log, &timed, None)?.sg_window_s;
+        if (chosen - window).abs() > 0.5 * dt {
+            window = chosen;
+            trials.clear();
+            let mut around = best;
+            loop {
+                let (b, _) = scan((around - 2..=around + 2).collect(), window, &mut trials);
+                if (b - around).abs() < 2 {
+                    best = b;
+                    break;
+                }
+                around = b;
+                if around.abs() >= limit {
+                    return Err(beyond());
+                }
+            }
+        }
+    }
+    // The fraction: the vertex of the parabola through the best row and its neighbours.
+    let at = |rows: i64, trials: &[DelayTrial]| {
+        trials
+            .iter()
+            .rev()
+            .find(|t| (t.delay_s / dt - rows as f64).abs() < 1e-6)
+            .and_then(|t| t.reduced_chi2)
+            .unwrap_or(f64::INFINITY)
+    };
+    let (fm, f0, fp) = (
+        at(best - 1, &trials),
+        at(best, &trials),
+        at(best + 1, &trials),
+    );
+    let curvature = fm - 2.0 * f0 + fp;
+    let (log, timed) = retime_reduced(reduced, noise, best as f64 * dt);
+    let (dof, inflation) = identify_reduced(&log, &timed, Some(window))
+        .map(|id| (id.dynamic_samples as f64, correlation_inflation(&id)))
+        .unwrap_or((0.0, 1.0));
+    let (rows, std_rows) = if curvature > 0.0 && curvature.is_finite() && dof > 0.0 {
+        let shift = ((fm - fp) / (2.0 * curvature)).clamp(-0.5, 0.5);
+        // The total chi-square, dof times the reduced one, rises by the fit's reduced
+        // chi-square (at least 1) at one standard deviation; the parabola through whole rows
+        // places the fraction no better than a row allows (a uniform error over a row).
+        let profile = (2.0 * f0.max(1.0) * inflation / (curvature * dof)).sqrt();
+        (
+            best as f64 + shift,
+            Some((profile * profile + ROW_RESOLUTION * ROW_RESOLUTION).sqrt()),
+        )
+    } else {
+        (best as f64, None)
+    };
+    trials.sort_by(|a, b| a.delay_s.total_cmp(&b.delay_s));
+    Ok(ForceDelayFit {
+        delay_s: rows * dt,
+        std_s: std_rows.map(|s| s * dt),
+        fitted: true,
+        window_s: Some(window),
+        trials,
+    })
+}
+
+/// How much the residuals' correlation widens a velocity-like parameter beyond what the
+/// chi-square's curvature says: the variance of d1 from identification's covariance (which
+/// allows for correlated residuals) over the paper's (A^T R^-1 A)^-1, at least 1. A delay's
+/// misfit is the force rate, the velocity times the stiffness, so the delay's profile is
+/// widened alike: the position noise, smoothed over the filter's window, enters every
+/// residual within it. On the independent rig's heavy transmission (m 0.25 N s^2/mm, a 4.8 s
+/// window) the factor was 14, on the default one (0.4 s) 2.3.
+pub fn correlation_inflation(id: &super::identify::Identification) -> f64 {
+    use super::identify::Param;
+    let names = &id.covariance_parameters;
+    let Some(i) = names.iter().position(|n| n == Param::D1.key()) else {
+        return 1.0;
+    };
+    // The paper's covariance is over X = [m, d0, d1, d2, mu, F0], the identifiable ones.
+    let x = [
+        Param::M,
+        Param::D0,
+        Param::D1,
+        Param::D2,
+        Param::Mu,
+        Param::F0,
+    ];
+    let Some(j) = x
+        .iter()
+        .filter(|p| names.iter().any(|n| n == p.key()))
+        .position(|p| *p == Param::D1)
+    else {
+        return 1.0;
+    };
+    let full = id.covariance.get(i).and_then(|r| r.get(i)).copied();
+    let paper = id
+        .paper_covariance_k2_fixed
+        .get(j)
+        .and_then(|r| r.get(j))
+        .copied();
+    match (full, paper) {
+        (Some(a), Some(b)) if a.is_finite() && b > 0.0 => (a / b).max(1.0),
+        _ => 1.0,
+    }
+}
+
+/// `reduced` with its force re-timed by `delay_s`, and `noise` with the force variance the
+/// interpolation leaves ([`RowDelay::noise_variance_factor`]); the rows it loses at the log's
+/// ends are no longer counted as the log's.
+pub fn retime_reduced(
+    reduced: &ReducedLog,
+    noise: &SensorNoise,
+    delay_s: f64,
+) -> (ReducedLog, SensorNoise) {
+    let delay = RowDelay::new(delay_s / reduced.log.dt_s());
+    let noise = SensorNoise {
+        force_variance_n2: noise.force_variance_n2 * delay.noise_variance_factor(),
+        ..*noise
+    };
+    let log_samples = reduced
+        .log_samples
+        .saturating_sub(delay.rows_lost() * reduced.block);
+    let log = retime_log(&reduced.log, delay);
+    (
+        ReducedLog {
+            log,
+            log_samples,
+            block: reduced.block,
+        },
+        noise,
+    )
+}
+
+/// Half the number of interpolation taps.
+pub const KERNEL_HALF: usize = 8;
+
+/// Interpolation taps for a fraction of a row.
+pub const KERNEL_TAPS: usize = 2 * KERNEL_HALF;
+
+/// The Kaiser window's shape parameter.
+const KAISER_BETA: f64 = 10.0;
+
+/// The largest delay (s) a log may be re-timed by: far beyond a channel scan or a converter's
+/// filter, so a larger value is a mistake (and would hold that many rows in memory).
+pub const MAX_FORCE_DELAY_S: f64 = 1.0;
+
+/// The largest delay in rows (the rows held while re-timing a stream).
+pub const MAX_FORCE_DELAY_ROWS: f64 = 100_000.0;
+
+/// The delay of the force channel, in rows of the log: a whole part and the interpolation
+/// kernel of the fraction (one tap of weight 1 when there is none).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RowDelay {
+    whole: i64,
+    /// Offset of the kernel's first tap from the whole row.
+    first: i64,
+    kernel: Vec<f64>,
+}
+
+impl RowDelay {
+    /// The delay of `rows` (finite, |rows| at most [`MAX_FORCE_DELAY_ROWS`]).
+    pub fn new(rows: f64) -> RowDelay {
+        let rows = if rows.is_finite() {
+            rows.clamp(-MAX_FORCE_DELAY_ROWS, MAX_FORCE_DELAY_ROWS)
+        } else {
+            0.0
+        };
+        let whole = rows.floor();
+        let phi = rows - whole;
+        // A fraction below a millionth of a row is no interpolation.
+        if !(1e-6..=1.0 - 1e-6).contains(&phi) {
+            return RowDelay {
+                whole: rows.round() as i64,
+                first: 0,
+                kernel: vec![1.0],
+            };
+        }
+        RowDelay {
+            whole: whole as i64,
+            first: 1 - KERNEL_HALF as i64,
+            kernel: fractional_kernel(phi),
+        }
+    }
+
+    /// The factor on a white force noise's variance after re-timing (the kernel's sum of
+    /// squares).
+    pub fn noise_variance_factor(&self) -> f64 {
+        self.kernel.iter().map(|h| h * h).sum()
+    }
+
+    /// Rows of the log the re-timed log lacks (its ends).
+    pub fn rows_lost(&self) -> usize {
+        let last = self.first + self.kernel.len() as i64 - 1;
+        let before = (self.whole + self.first).min(0).unsigned_abs();
+        let after = (self.whole + last).max(0).unsigned_abs();
+        (before + after) as usize
+    }
+}
+
+/// The factor on a white force noise's variance after re-timing by `rows`.
+pub fn noise_variance_factor(rows: f64) -> f64 {
+    RowDelay::new(rows).noise_variance_factor()
+}
+
+/// The weights, at offsets 1 - [`KERNEL_HALF`] ..= [`KERNEL_HALF`] from the row before, of the
+/// value a fraction `phi` (0 < phi < 1) of a row later: a Kaiser-windowed sinc whose weights
+/// sum to 1.
+fn fractional_kernel(phi: f64) -> Vec<f64> {
+    let h = KERNEL_HALF as f64;
+    let mut w: Vec<f64> = (1 - KERNEL_HALF as i64..=KERNEL_HALF as i64)
+        .map(|j| {
+            let u = j as f64 - phi;
+            let sinc = if u.abs() < 1e-12 {
+                1.0
+            } else {
+                (std::f64::consts::PI * u).sin() / (std::f64::consts::PI * u)
+            };
+            let r = (1.0 - (u / h).powi(2)).max(0.0);
+            sinc * bessel_i0(KAISER_BETA * r.sqrt()) / bessel_i0(KAISER_BETA)
+        })
+        .collect();
+    let sum: f64 = w.iter().sum();
+    for v in w.iter_mut() {
+        *v /= sum;
+    }
+    w
+}
+
+/// The modified Bessel function of the first kind, order 0 (power series; converges for the
+/// window's arguments, at most [`KAISER_BETA`]).
+fn bessel_i0(x: f64) -> f64 {
+    let q = x * x / 4.0;
+    let (mut term, mut sum) = (1.0, 1.0);
+    for k in 1..60 {
+        term *= q / (k * k) as f64;
+        sum += term;
+        if term < 1e-17 * sum {
+            break;
+        }
+    }
+    sum
+}
+
+/// A stream of samples with the force re-timed by a [`RowDelay`]: each position keeps its
+/// time, and takes the force read `delay` rows later. Holds about |delay| + [`KERNEL_TAPS`]
+/// rows.
+#[derive(Debug)]
+pub struct ForceRetimer<I> {
+    inner: I,
+    delay: RowDelay,
+    /// Times and positions from row `pos_start`.
+    positions: VecDeque<(f64, f64)>,
+    pos_start: i64,
+    /// Forces from row `force_start`.
+    forces: VecDeque<f64>,
+    force_start: i64,
+    /// Rows read.
+    read: i64,
+    /// The next row to give.
+    next: i64,
+}
+
+impl<I> ForceRetimer<I>
+where
+    I: Iterator<Item = Result<Sample, LogError>>,
+{
+    /// Re-times `inner`'s force by `delay`.
+    pub fn new(inner: I, delay: RowDelay) -> ForceRetimer<I> {
+        // The first row whose kernel starts inside the log.
+        let next = (-(delay.whole + delay.first)).max(0);
+        let force_start = next + delay.whole + delay.first;
+        ForceRetimer {
+            inner,
+            delay,
+            positions: VecDeque::new(),
+            pos_start: next,
+            forces: VecDeque::new(),
+            force_start,
+            read: 0,
+            next,
+        }
+    }
+}
+
+impl<I> Iterator for ForceRetimer<I>
+where
+    I: Iterator<Item = Result<Sample, LogError>>,
+{
+    type Item = Result<Sample, LogError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        loop {
+            let k = self.next;
+            let first = k + self.delay.whole + self.delay.first;
+            let last = first + self.delay.kernel.len() as i64 - 1;
+            if k < self.read && last < self.read {
+                let (t_s, position_mm) = self.positions[(k - self.pos_start) as usize];
+                let force_n = self
+                    .delay
+                    .kernel
+                    .iter()
+                    .enumerate()
+                    .map(|(j, h)| h * self.forces[(first - self.force_start) as usize + j])
+                    .sum();
+                self.next += 1;
+                while self.pos_start <= k {
+                    self.positions.pop_front();
+                    self.pos_start += 1;
+                }
+                while self.force_start <= first {
+                    self.forces.pop_front();
+                    self.force_start += 1;
+                }
+                return Some(Ok(Sample {
+                    t_s,
+                    force_n,
+                    position_mm,
+                }));
+            }
+            match self.inner.next()? {
+                Err(e) => return Some(Err(e)),
+                Ok(s) => {
+                    // Rows before the first that is given, or whose force no row takes, are
+                    // not held.
+                    if self.read >= self.pos_start {
+                        self.positions.push_back((s.t_s, s.position_mm));
+                    }
+                    if self.read >= self.force_start {
+                        self.forces.push_back(s.force_n);
+                    }
+                    self.read += 1;
+                }
+            }
+        }
+    }
+}
+
+/// `log` with its force re-timed by `delay` rows ([`ForceRetimer`]); the filled gaps, rows
+/// left out and units row are kept as read.
+pub fn retime_log(log: &CalibrationLog, delay: RowDelay) -> CalibrationLog {
+    let samples = (0..log.len()).map(|i| {
+        Ok(Sample {
+            t_s: log.t_s[i],
+            force_n: log.force_n[i],
+            position_mm: log.position_mm[i],
+        })
+    });
+    let mut out = CalibrationLog {
+        filled: log.filled.clone(),
+        left_out: log.left_out.clone(),
+        units_row: log.units_row.clone(),
+        ..CalibrationLog::default()
+    };
+    for s in ForceRetimer::new(samples, delay).flatten() {
+        out.t_s.push(s.t_s);
+        out.force_n.push(s.force_n);
+        out.position_mm.push(s.position_mm);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn log_of(f: impl Fn(f64) -> f64, x: impl Fn(f64) -> f64, n: usize, dt: f64) -> CalibrationLog {
+        let t: Vec<f64> = (0..n).map(|i| i as f64 * dt).collect();
+        CalibrationLog {
+            force_n: t.iter().map(|&t| f(t)).collect(),
+            position_mm: t.iter().map(|&t| x(t)).collect(),
+            t_s: t,
+            ..CalibrationLog::default()
+        }
+    }
+
+    #[test]
+    fn a_whole_row_delay_re_pairs_the_readings_exactly() {
+        let log = log_of(|t| t * 100.0, |t| -t, 50, 0.01);
+        for d in [-3i64, 0, 2, 7] {
+            let out = retime_log(&log, RowDelay::new(d as f64));
+            assert_eq!(out.len(), 50 - d.unsigned_abs() as usize, "delay {d}");
+            for k in 0..out.len() {
+                let row = (out.t_s[k] / 0.01).round() as i64;
+                assert_eq!(out.position_mm[k], log.position_mm[row as usize]);
+                assert_eq!(out.force_n[k], log.force_n[(row + d) as usize]);
+            }
+        }
+    }
+
+    #[test]
+    fn a_fractional_delay_recovers_a_smooth_force_at_the_later_instant() {
+        // A 2 Hz sine sampled at 100 Hz (0.04 of the Nyquist frequency).
+        let w = 2.0 * std::f64::consts::PI * 2.0;
+        let log = log_of(|t| (w * t).sin(), |t| t, 400, 0.01);
+        for rows in [0.25, 0.5, -1.7, 3.4] {
+            let out = retime_log(&log, RowDelay::new(rows));
+            assert!(out.len() >= 400 - KERNEL_TAPS - 4);
+            for k in 0..out.len() {
+                let want = (w * (out.t_s[k] + rows * 0.01)).sin();
+                assert!(
+                    (out.force_n[k] - want).abs() < 1e-4,
+                    "{rows}: {k}: {} {want}",
+                    out.force_n[k]
+                );
+                assert_eq!(out.position_mm[k], out.t_s[k]);
+            }
+        }
+    }
+
+    #[test]
+    fn the_noise_factor_is_the_kernels_sum_of_squares() {
+        assert_eq!(noise_variance_factor(2.0), 1.0);
+        let half = noise_variance_factor(0.5);
+        assert!((0.83..0.9).contains(&half), "{half}");
+        // White noise through the kernel has that variance.
+        let mut state = 12345u64;
+        let mut gauss = || {
+            let mut s = 0.0;
+            for _ in 0..12 {
+                state = state
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                s += (state >> 11) as f64 / (1u64 << 53) as f64;
+            }
+            s - 6.0
+        };
+        let n = 200_000;
+        let log = CalibrationLog {
+            t_s: (0..n).map(|i| i as f64).collect(),
+            force_n: (0..n).map(|_| gauss()).collect(),
+            position_mm: vec![0.0; n],
+            ..CalibrationLog::default()
+        };
+        let out = retime_log(&log, RowDelay::new(0.5));
+        let var = out.force_n.iter().map(|f| f * f).sum::<f64>() / out.len() as f64;
+        assert!((var / half - 1.0).abs() < 0.02, "{var} against {half}");
+    }
+
+    #[test]
+    fn errors_pass_through_and_memory_stays_bounded() {
+        let rows = (0..10_000).map(|i| {
+            if i == 5000 {
+                Err(LogError::Io("lost".into()))
+            } else {
+                Ok(Sample {
+                    t_s: i as f64,
+                    force_n: 0.0,
+                    position_mm: 0.0,
+                })
+            }
+        });
+        let mut r = ForceRetimer::new(rows, RowDelay::new(30.5));
+        let mut errors = 0;
+        for s in r.by_ref() {
+            errors += s.is_err() as usize;
+        }
+        assert_eq!(errors, 1);
+        assert!(
+            r.positions.len() <= 30 + KERNEL_TAPS + 2,
+            "{}",
+            r.positions.len()
+        );
+        assert!(r.forces.len() <= KERNEL_TAPS + 2);
+    }
+}
