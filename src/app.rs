@@ -496,6 +496,48 @@ pub struct IdentifyRun {
     pub force_delay: Option<crate::estimate::retime::ForceDelayFit>,
 }
 
+/// Re-times the force of a log held in memory by the force channel's delay (given, or fitted
+/// by identification on the log's block means, as `identify` does), and brings the force
+/// noise to what the interpolation leaves. None when there is no delay.
+fn retime_in_memory(
+    log: &mut crate::estimate::log::CalibrationLog,
+    noise: &mut crate::estimate::identify::SensorNoise,
+    force_delay: ForceDelay,
+    window_s: Option<f64>,
+) -> Result<Option<crate::estimate::retime::ForceDelayFit>> {
+    use crate::estimate::identify::{Reduction, MAX_IDENTIFY_SAMPLES};
+    use crate::estimate::retime::{
+        fit_force_delay, retime_log, ForceDelayFit, RowDelay, MAX_FORCE_DELAY_ROWS,
+    };
+    let delay = match force_delay {
+        ForceDelay::None => return Ok(None),
+        ForceDelay::Seconds(s) => ForceDelayFit::given(s),
+        ForceDelay::Auto => {
+            let mut reduction = Reduction::new(MAX_IDENTIFY_SAMPLES);
+            for i in 0..log.len() {
+                reduction.push(crate::estimate::log::Sample {
+                    t_s: log.t_s[i],
+                    force_n: log.force_n[i],
+                    position_mm: log.position_mm[i],
+                });
+            }
+            fit_force_delay(&reduction.finish(), noise, window_s)?
+        }
+    };
+    let rows = delay.delay_s / log.dt_s();
+    if rows.is_nan() || rows.abs() > MAX_FORCE_DELAY_ROWS {
+        return Err(Error::Argument(format!(
+            "--force-delay: {:.3} s is {rows:.0} samples of this log; at most \
+             {MAX_FORCE_DELAY_ROWS:.0} are held while the force is re-timed",
+            delay.delay_s
+        )));
+    }
+    let rows = RowDelay::new(rows);
+    noise.force_variance_n2 *= rows.noise_variance_factor();
+    *log = retime_log(log, rows);
+    Ok(Some(delay))
+}
+
 /// Prints the warnings of a run's sensor noise (a given variance the log contradicts).
 fn warn_noise(log_path: &Path, noise: &crate::estimate::noise::ResolvedNoise) {
     for w in &noise.warnings {
@@ -846,7 +888,10 @@ pub fn run_validate(
         .noise
         .resolve(crate::estimate::noise::log_noise(&log).as_ref());
     warn_noise(log_path, &resolved);
-    let noise = resolved.noise;
+    let mut noise = resolved.noise;
+    // The force channel's delay: the force re-timed here, before the encoder zero is fitted
+    // and before every verdict below.
+    let force_delay = retime_in_memory(&mut log, &mut noise, opts.force_delay, opts.window_s)?;
     // The encoder zero: fitted against the design (auto) or given; taken out of the log here,
     // so that every verdict below sees the corrected positions.
     let offset_mm = match opts.position_offset {
@@ -861,6 +906,7 @@ pub fn run_validate(
     }
     let opts = &EstimateOptions {
         position_offset: PositionOffset::None,
+        force_delay: ForceDelay::None,
         noise: noise.into(),
         ..opts.clone()
     };
@@ -988,6 +1034,7 @@ pub fn run_validate(
                 v.pass = v.criteria.iter().all(|c| c.pass);
             }
             v.position_offset_mm = offset_mm;
+            v.force_delay = force_delay.clone();
             if judge_strokes(&mut v.criteria, &mut v.band_exits) {
                 v.pass = v.criteria.iter().all(|c| c.pass);
             }
@@ -1021,6 +1068,7 @@ pub fn run_validate(
             refuse_reversed_sensor(&log, &noise, opts.window_s)?;
             let mut v = validate_curve(&designed, &log, &noise, tolerance, band.as_ref());
             v.position_offset_mm = offset_mm;
+            v.force_delay = force_delay.clone();
             if judge_strokes(&mut v.criteria, &mut v.band_exits) {
                 v.pass = !v.bins.is_empty() && v.criteria.iter().all(|c| c.pass);
             }
@@ -1432,6 +1480,8 @@ pub struct DiagnoseOptions {
     pub noise: crate::estimate::noise::GivenNoise,
     /// Savitzky-Golay window (s), or chosen from the data.
     pub window_s: Option<f64>,
+    /// The force channel's delay behind the position: the force is re-timed by it.
+    pub force_delay: ForceDelay,
     /// The encoder zero: as logged, given, or fitted.
     pub zero: PositionOffset,
 }
@@ -1462,20 +1512,18 @@ fn diagnose_log(
     opts: &DiagnoseOptions,
 ) -> Result<(crate::design::Design, crate::verdict::diagnose::Diagnosis)> {
     let design = crate::design::design_with(spec, false)?;
-    let log = read_log_file(log_path, &opts.map, opts.sampling_tolerance, true)?;
+    let mut log = read_log_file(log_path, &opts.map, opts.sampling_tolerance, true)?;
     let resolved = opts
         .noise
         .resolve(crate::estimate::noise::log_noise(&log).as_ref());
     warn_noise(log_path, &resolved);
-    refuse_reversed_sensor(&log, &resolved.noise, opts.window_s)?;
-    let diagnosis = crate::verdict::diagnose::diagnose(
-        &design,
-        &log,
-        &resolved.noise,
-        opts.window_s,
-        opts.zero,
-    )
-    .map_err(|e| Error::Argument(format!("diagnose {}: {e}", log_path.display())))?;
+    let mut noise = resolved.noise;
+    let force_delay = retime_in_memory(&mut log, &mut noise, opts.force_delay, opts.window_s)?;
+    refuse_reversed_sensor(&log, &noise, opts.window_s)?;
+    let mut diagnosis =
+        crate::verdict::diagnose::diagnose(&design, &log, &noise, opts.window_s, opts.zero)
+            .map_err(|e| Error::Argument(format!("diagnose {}: {e}", log_path.display())))?;
+    diagnosis.force_delay = force_delay;
     Ok((design, diagnosis))
 }
 

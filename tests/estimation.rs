@@ -50,6 +50,7 @@ fn options(noise: Noise, discretization: Discretization) -> EstimateOptions {
         p0_std: Vec::new(),
         r_position_mm2: None,
         position_offset: camspring::estimate::pipeline::PositionOffset::None,
+        force_delay: camspring::estimate::retime::ForceDelay::None,
         identify_span_s: camspring::estimate::pipeline::DEFAULT_IDENTIFY_SPAN_S,
         twins: camspring::estimate::pipeline::DEFAULT_TWINS,
     }

@@ -17,6 +17,10 @@ use super::identify::{
 };
 use super::log::{CalibrationLog, LogError, Sample};
 use super::noise::{GivenNoise, LogNoise, LogNoiseSurvey, ResolvedNoise};
+use super::retime::{
+    fit_force_delay, retime_reduced, ForceDelay, ForceDelayFit, ForceRetimer, RowDelay,
+    MAX_FORCE_DELAY_ROWS,
+};
 use super::sg;
 use super::twin::{self, TwinBias, TwinSource, TwinTruth};
 use crate::model::{ExpLaw, ForceLaw};
@@ -114,6 +118,8 @@ pub struct EstimateOptions {
     pub r_position_mm2: Option<f64>,
     /// The log's encoder zero: taken out of the positions before anything else.
     pub position_offset: PositionOffset,
+    /// The force channel's delay behind the position: the force is re-timed by it.
+    pub force_delay: ForceDelay,
     /// Identification, the filter's init, uses the first this many seconds of the log (s);
     /// [`DEFAULT_IDENTIFY_SPAN_S`] by default.
     pub identify_span_s: f64,
@@ -144,6 +150,7 @@ impl EstimateOptions {
             p0_std: Vec::new(),
             r_position_mm2: None,
             position_offset: PositionOffset::None,
+            force_delay: ForceDelay::None,
             identify_span_s: DEFAULT_IDENTIFY_SPAN_S,
             twins: DEFAULT_TWINS,
         }
@@ -169,6 +176,8 @@ pub struct EstimateRun {
     pub consistency: Consistency,
     /// The encoder zero taken out of the log's positions (mm), when one was.
     pub position_offset_mm: Option<f64>,
+    /// The force channel's delay the force was re-timed by, when it was.
+    pub force_delay: Option<ForceDelayFit>,
     /// The filter's bias in its constants, measured on twins of the log and taken out of
     /// [`EkfRun::last`] (None: no twins, or no identification to simulate them from).
     pub twins: Option<TwinBias>,
@@ -985,6 +994,38 @@ where
         ))
         .into());
     }
+    // The force channel's delay behind the position: given or fitted on identification's
+    // samples, and the force re-timed to its position's instant in every pass (the survey's
+    // identification samples included). The force noise is what the interpolation leaves.
+    let force_delay = match opts.force_delay {
+        ForceDelay::None => None,
+        ForceDelay::Seconds(s) => Some(ForceDelayFit::given(s)),
+        ForceDelay::Auto => Some(fit_force_delay(&survey.reduced, noise, opts.window_s)?),
+    };
+    let delay_rows = force_delay.as_ref().map_or(0.0, |d| d.delay_s) / survey.dt_s;
+    if delay_rows.abs() > MAX_FORCE_DELAY_ROWS {
+        return Err(EkfError::Input(format!(
+            "a force delay of {delay_rows:.0} samples; at most {MAX_FORCE_DELAY_ROWS:.0} are \
+             held while the force is re-timed"
+        ))
+        .into());
+    }
+    let row_delay = RowDelay::new(delay_rows);
+    let (timed_survey, timed_noise);
+    let (survey, noise) = match &force_delay {
+        None => (survey, noise),
+        Some(d) => {
+            let (reduced, n) = retime_reduced(&survey.reduced, noise, d.delay_s);
+            timed_survey = LogSurvey {
+                samples: survey.samples.saturating_sub(row_delay.rows_lost()),
+                reduced,
+                ..survey.clone()
+            };
+            timed_noise = n;
+            (&timed_survey, &timed_noise)
+        }
+    };
+    let mut open = move || open().map(|samples| ForceRetimer::new(samples, row_delay.clone()));
     // The encoder zero: taken out of every position, the survey's included.
     let offset_mm = match opts.position_offset {
         PositionOffset::None => 0.0,
@@ -1375,6 +1416,7 @@ where
         recovery,
         consistency,
         position_offset_mm: (offset_mm != 0.0).then_some(offset_mm),
+        force_delay,
         twins,
         std_before_disagreement,
         noise: resolved,

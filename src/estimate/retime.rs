@@ -75,7 +75,7 @@ pub const SEARCH_S: f64 = 0.25;
 pub const ROW_RESOLUTION: f64 = 0.288_675_134_594_812_9;
 
 /// The fewest rows either side of zero [`fit_force_delay`] searches.
-const SEARCH_ROWS_MIN: i64 = 5;
+pub const SEARCH_ROWS_MIN: i64 = 5;
 
 /// The force channel's delay behind the position, fitted by identification: the delay
 /// (in rows of `reduced`) that brings identification's reduced chi-square, with the filter

@@ -504,6 +504,7 @@ pub fn estimate_json(est: &EstimateRun) -> Value {
         "t_end_s": run.t_end_s,
         "samples": run.samples,
         "position_offset_mm": est.position_offset_mm,
+        "force_delay": est.force_delay,
         "noise": sensor_noise_json(&est.noise),
         "first_sample": run.first_sample,
         "outliers": run.outliers,
@@ -653,6 +654,9 @@ pub fn format_estimate(est: &EstimateRun) -> String {
         "EKF over {} samples (to t = {:.3} s); final estimates (1-sigma):",
         run.samples, run.t_end_s
     );
+    if let Some(d) = &est.force_delay {
+        s.push_str(&force_delay_line(d));
+    }
     for (name, k, unit) in [
         ("k2", idx::K2, "1/mm"),
         ("M", idx::M, "N s^2/mm"),
@@ -734,6 +738,9 @@ pub fn format_validation(v: &Validation) -> String {
     }
     s.push_str(&band_exit_lines(&v.band_exits));
     s.push_str(&coverage_lines(v.coverage.as_ref(), v.position_offset_mm));
+    if let Some(d) = &v.force_delay {
+        s.push_str(&force_delay_line(d));
+    }
     s
 }
 
@@ -918,6 +925,9 @@ pub fn format_curve_validation(v: &CurveValidation) -> String {
     );
     s.push_str(&band_exit_lines(&v.band_exits));
     s.push_str(&coverage_lines(v.coverage.as_ref(), v.position_offset_mm));
+    if let Some(d) = &v.force_delay {
+        s.push_str(&force_delay_line(d));
+    }
     s
 }
 
@@ -1172,6 +1182,9 @@ pub fn format_diagnosis(d: &crate::verdict::diagnose::Diagnosis) -> String {
         "diagnosis: the force misses the design's forward model by {:.2} % RMS; the fitted build leaves {:.2} % unexplained",
         d.force_error_before_percent, d.force_error_after_percent
     );
+    if let Some(delay) = &d.force_delay {
+        s.push_str(&force_delay_line(delay));
+    }
     if d.findings.is_empty() {
         s.push_str("  no build parameter is off its design beyond its uncertainty\n");
     }

@@ -315,6 +315,9 @@ pub struct Diagnosis {
     /// [`crate::estimate::identify::REVERSAL_TRAVEL_SHARE`] the log moves one way only, and
     /// the friction outside the cam cannot be told from the spring's force on that stroke.
     pub reversal_travel_share: f64,
+    /// The force channel's delay the force was re-timed by before the diagnosis, if any (set
+    /// by the caller that re-timed it).
+    pub force_delay: Option<crate::estimate::retime::ForceDelayFit>,
 }
 
 impl Diagnosis {
@@ -1461,6 +1464,7 @@ pub fn diagnose(
         }
     };
     let mut diagnosis = Diagnosis {
+        force_delay: None,
         spring_rate_scale: fitted(
             0,
             1.0 + p[0],

@@ -261,6 +261,8 @@ pub struct Validation {
     pub band_exits: Vec<BandExit>,
     /// The encoder zero taken out of the log before judging it (mm), if any.
     pub position_offset_mm: Option<f64>,
+    /// The force channel's delay the force was re-timed by before judging it, if any.
+    pub force_delay: Option<crate::estimate::retime::ForceDelayFit>,
     /// What part of the designed stroke the log covers (set with [`coverage`]).
     pub coverage: Option<Coverage>,
     /// The build's diagnosis, whose stroke-by-stroke curves judge the force
@@ -432,6 +434,7 @@ pub fn validate_with(
         range_max_mm: hi,
         band_exits,
         position_offset_mm: None,
+        force_delay: None,
         coverage: None,
         diagnosis: None,
     }
@@ -481,6 +484,8 @@ pub struct CurveValidation {
     pub band_exits: Vec<BandExit>,
     /// The encoder zero taken out of the log before judging it (mm), if any.
     pub position_offset_mm: Option<f64>,
+    /// The force channel's delay the force was re-timed by before judging it, if any.
+    pub force_delay: Option<crate::estimate::retime::ForceDelayFit>,
     /// What part of the designed stroke the log covers (set with [`coverage`]).
     pub coverage: Option<Coverage>,
     /// The build's diagnosis, whose stroke-by-stroke curves judge the force
@@ -646,6 +651,7 @@ pub fn validate_curve(
         range_max_mm: hi,
         band_exits,
         position_offset_mm: None,
+        force_delay: None,
         coverage: None,
         diagnosis: None,
     }
@@ -1244,6 +1250,7 @@ mod tests {
             zero_correlation: 0.0,
         };
         Diagnosis {
+            force_delay: None,
             spring_rate_scale: fitted,
             preload_offset_mm: fitted,
             friction: fitted,

@@ -218,11 +218,6 @@ pub enum Command {
         /// Print the result as JSON on stdout.
         #[arg(long)]
         json: bool,
-        /// How late the force is read after the position: none (read together), a duration such
-        /// as 10ms (negative when the force is read first), or auto (fitted by identification).
-        /// The force is re-timed to its position's instant (identify only, for now).
-        #[arg(long, value_name = "auto|DURATION", default_value = "none", value_parser = force_delay, allow_hyphen_values = true)]
-        force_delay: ForceDelay,
         #[command(flatten)]
         sensors: Sensors,
         #[command(flatten)]
@@ -496,6 +491,11 @@ pub struct Sensors {
     /// Savitzky-Golay window, e.g. 0.8s (default: chosen from the log by the balancing principle).
     #[arg(long, value_parser = duration)]
     pub window: Option<f64>,
+    /// How late the force is read after the position: none (read together), a duration such
+    /// as 10ms (negative when the force is read first), or auto (fitted by identification).
+    /// The force is re-timed to its position's instant.
+    #[arg(long, value_name = "auto|DURATION", default_value = "none", value_parser = force_delay, allow_hyphen_values = true)]
+    pub force_delay: ForceDelay,
 }
 
 fn force_delay(text: &str) -> Result<ForceDelay, String> {

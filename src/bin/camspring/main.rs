@@ -201,6 +201,7 @@ fn sensors(s: &Sensors) -> Result<GivenNoise, Error> {
 fn filter_options(f: &FilterArgs, s: &Sensors) -> Result<EstimateOptions, Error> {
     let mut opts = EstimateOptions::new(sensors(s)?);
     opts.window_s = s.window;
+    opts.force_delay = s.force_delay;
     opts.discretization = f.discretization.into();
     opts.force_rate = f.force_rate;
     opts.q =
@@ -225,6 +226,7 @@ fn diagnose_options(b: &BuildFitArgs) -> Result<DiagnoseOptions, Error> {
         sampling_tolerance: b.columns.sampling_tolerance,
         noise: sensors(&b.sensors)?,
         window_s: b.sensors.window,
+        force_delay: b.sensors.force_delay,
         zero: b.position_offset,
     })
 }
@@ -515,7 +517,6 @@ fn main() -> ExitCode {
         Command::Identify {
             log,
             json,
-            force_delay,
             sensors: s,
             columns: c,
         } => emit(
@@ -528,7 +529,7 @@ fn main() -> ExitCode {
                     c.sampling_tolerance,
                     &sensor,
                     s.window,
-                    force_delay,
+                    s.force_delay,
                 )?;
                 let id = &run.identification;
                 let code = if id.adequacy.status == FitStatus::DoesNotFit {
