@@ -456,7 +456,9 @@ pub fn run_identify(
     window_s: Option<f64>,
     force_delay: ForceDelay,
 ) -> Result<IdentifyRun> {
-    use crate::estimate::retime::{fit_force_delay, retime_reduced, ForceDelayFit};
+    use crate::estimate::retime::{
+        carry_delay_uncertainty, fit_force_delay, retime_reduced, ForceDelayFit,
+    };
     let surveyed = survey_log_file(log_path, map, sampling_tolerance, f64::INFINITY)?;
     let mut noise = noise.resolve(surveyed.noise.as_ref());
     warn_noise(log_path, &noise);
@@ -465,14 +467,18 @@ pub fn run_identify(
         ForceDelay::Seconds(s) => Some(ForceDelayFit::given(s)),
         ForceDelay::Auto => Some(fit_force_delay(&surveyed.reduced, &noise.noise, window_s)?),
     };
-    let identification = match &delay {
+    let mut delay = delay;
+    let identification = match &mut delay {
         None => {
             crate::estimate::identify::identify_reduced(&surveyed.reduced, &noise.noise, window_s)?
         }
         Some(d) => {
             let (reduced, timed) = retime_reduced(&surveyed.reduced, &noise.noise, d.delay_s);
-            noise.noise = timed;
-            crate::estimate::identify::identify_reduced(&reduced, &noise.noise, window_s)?
+            let raw = std::mem::replace(&mut noise.noise, timed);
+            let mut id =
+                crate::estimate::identify::identify_reduced(&reduced, &noise.noise, window_s)?;
+            carry_delay_uncertainty(&mut id, &surveyed.reduced, &raw, d);
+            id
         }
     };
     Ok(IdentifyRun {

@@ -521,6 +521,17 @@ pub enum IdentifyError {
         /// The search's limit (s).
         limit_s: f64,
     },
+    /// Produced by [`super::retime::fit_force_delay`] when the fit's chi-square does not
+    /// curve upward about its least value: the log does not determine the delay.
+    #[error(
+        "the fit hardly changes as the force is re-timed (with the filter window at \
+         {window_s:.3} s): this log does not determine the force channel's delay; give it \
+         with --force-delay, e.g. 5ms as the rig's data sheet states, or leave it out"
+    )]
+    ForceDelayUndetermined {
+        /// The filter window the profile held (s).
+        window_s: f64,
+    },
     /// Produced by [`identify`] when the log does not move the spring enough.
     #[error(
         "the filtered position varies by only {range_mm:.4} mm (position noise {noise_mm:.4} mm): this log \

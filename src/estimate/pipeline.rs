@@ -18,8 +18,8 @@ use super::identify::{
 use super::log::{CalibrationLog, LogError, Sample};
 use super::noise::{GivenNoise, LogNoise, LogNoiseSurvey, ResolvedNoise};
 use super::retime::{
-    fit_force_delay, retime_reduced, ForceDelay, ForceDelayFit, ForceRetimer, RowDelay,
-    MAX_FORCE_DELAY_ROWS,
+    carry_delay_uncertainty, fit_force_delay, retime_reduced, ForceDelay, ForceDelayFit,
+    ForceRetimer, RowDelay, MAX_FORCE_DELAY_ROWS,
 };
 use super::sg;
 use super::twin::{self, TwinBias, TwinSource, TwinTruth};
@@ -1011,6 +1011,8 @@ where
         .into());
     }
     let row_delay = RowDelay::new(delay_rows);
+    let (raw_reduced, raw_noise) = (&survey.reduced, noise);
+    let mut force_delay = force_delay;
     let (timed_survey, timed_noise);
     let (survey, noise) = match &force_delay {
         None => (survey, noise),
@@ -1048,12 +1050,25 @@ where
     } else {
         &survey.reduced
     };
+    // The log as read, with the same encoder zero, for carrying the delay's uncertainty.
+    let raw_shifted;
+    let raw_reduced = if offset_mm != 0.0 && force_delay.is_some() {
+        let mut r = raw_reduced.clone();
+        r.log.shift_position(offset_mm);
+        raw_shifted = r;
+        &raw_shifted
+    } else {
+        raw_reduced
+    };
     let (lo, hi) = survey.position_range_mm;
     // Why the filter has nothing to be checked against, when it has not.
     let mut unchecked = None;
     let (mut init, identification, stroke) = match &opts.init {
         EstimateInit::Identify => {
-            let id = identify_reduced(reduced, noise, opts.window_s)?;
+            let mut id = identify_reduced(reduced, noise, opts.window_s)?;
+            if let Some(d) = force_delay.as_mut() {
+                carry_delay_uncertainty(&mut id, raw_reduced, raw_noise, d);
+            }
             if let Some(fault) = &id.sign_fault {
                 return Err(EstimateError::SignFault(fault.clone()));
             }
@@ -1080,7 +1095,10 @@ where
             // default one F0 at z +38 (2026-11-27). A log identification cannot fit starts
             // as before, with the dynamics wide open.
             match identify_reduced(reduced, noise, opts.window_s) {
-                Ok(id) => {
+                Ok(mut id) => {
+                    if let Some(d) = force_delay.as_mut() {
+                        carry_delay_uncertainty(&mut id, raw_reduced, raw_noise, d);
+                    }
                     if let Some(fault) = id.sign_fault {
                         return Err(EstimateError::SignFault(fault));
                     }

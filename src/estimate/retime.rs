@@ -15,7 +15,7 @@ use std::collections::VecDeque;
 
 use serde::Serialize;
 
-use super::identify::{identify_reduced, IdentifyError, ReducedLog, SensorNoise};
+use super::identify::{identify_reduced, Identification, IdentifyError, ReducedLog, SensorNoise};
 use super::log::{CalibrationLog, LogError, Sample};
 
 /// How the force channel's delay behind the position is set.
@@ -52,6 +52,10 @@ pub struct ForceDelayFit {
     pub window_s: Option<f64>,
     /// The delays the profile tried, in the order tried.
     pub trials: Vec<DelayTrial>,
+    /// What the delay's standard deviation adds to each identified parameter's, already
+    /// included in identification's standard deviations (by parameter key; empty where the
+    /// delay was given, or where it was not carried).
+    pub parameter_std: std::collections::BTreeMap<&'static str, f64>,
 }
 
 impl ForceDelayFit {
@@ -63,6 +67,7 @@ impl ForceDelayFit {
             fitted: false,
             window_s: None,
             trials: Vec::new(),
+            parameter_std: Default::default(),
         }
     }
 }
@@ -73,6 +78,62 @@ pub const SEARCH_S: f64 = 0.25;
 /// The standard deviation (rows) of the fraction of a row the parabola gives: a uniform error
 /// over a row, 1/sqrt(12).
 pub const ROW_RESOLUTION: f64 = 0.288_675_134_594_812_9;
+
+/// A fitted delay's standard deviation (s) beyond which the log is said not to determine it.
+pub const UNDETERMINED_STD_S: f64 = 0.05;
+
+/// Rows either side of the best whole row that the profile's parabola is fitted to.
+pub const LOCAL_ROWS: i64 = 3;
+
+/// A least-squares parabola a + b u + c u^2 through a profile's points (u in rows from the
+/// best row).
+#[derive(Debug, Clone, Copy)]
+struct Parabola {
+    /// Where it is least (rows from the best row).
+    vertex: f64,
+    /// Its value there.
+    least: f64,
+    /// c, half its second derivative (per row^2).
+    curvature: f64,
+    /// The vertex's standard deviation from the points' scatter about the parabola (rows).
+    vertex_std: f64,
+}
+
+/// The least-squares parabola through `points`; None without an upward curvature (a profile
+/// that does not determine its least value).
+fn local_parabola(points: &[(f64, f64)]) -> Option<Parabola> {
+    use nalgebra::{Matrix3, Vector3};
+    if points.len() < 4 {
+        return None;
+    }
+    let (mut ata, mut aty) = (Matrix3::<f64>::zeros(), Vector3::<f64>::zeros());
+    for &(u, f) in points {
+        let row = Vector3::new(1.0, u, u * u);
+        ata += row * row.transpose();
+        aty += row * f;
+    }
+    let inv = ata.try_inverse()?;
+    let p = inv * aty;
+    let (a, b, c) = (p[0], p[1], p[2]);
+    if c.is_nan() || c <= 0.0 || !c.is_finite() {
+        return None;
+    }
+    let rss: f64 = points
+        .iter()
+        .map(|&(u, f)| (f - a - b * u - c * u * u).powi(2))
+        .sum();
+    let s2 = rss / (points.len() - 3) as f64;
+    let vertex = -b / (2.0 * c);
+    // The delta method: d vertex / d(b, c) = (-1 / 2c, b / 2c^2).
+    let g = Vector3::new(0.0, -1.0 / (2.0 * c), b / (2.0 * c * c));
+    let vertex_var = s2 * (g.transpose() * inv * g)[0];
+    Some(Parabola {
+        vertex,
+        least: a + b * vertex + c * vertex * vertex,
+        curvature: c,
+        vertex_std: vertex_var.max(0.0).sqrt(),
+    })
+}
 
 /// The fewest rows either side of zero [`fit_force_delay`] searches.
 pub const SEARCH_ROWS_MIN: i64 = 5;
@@ -90,14 +151,18 @@ pub const SEARCH_ROWS_MIN: i64 = 5;
 /// 3. Where the window was chosen, it is chosen again on the log re-timed by the best whole
 ///    row (a log read with a large delay chooses a poor one), and the rows around the best
 ///    are tried again with it.
-/// 4. The fraction of a row: the vertex of the parabola through the best row and its
-///    neighbours. Interpolated delays are not compared: the interpolation lowers the force
+/// 4. The fraction of a row: the vertex of the least-squares parabola through the rows within
+///    [`LOCAL_ROWS`] of the best (a profile can alternate between odd and even rows by more
+///    than its curvature over a row; the parabola averages that). A parabola that does not
+///    curve upward is an error: the log does not determine the delay. Interpolated delays
+///    are not compared: the interpolation lowers the force
 ///    noise between rows (by up to 14 %), which moves the reduced chi-square more than a
 ///    fraction of a row of delay does (on the independent rig's multisine at 100 Hz, a 10 ms
 ///    delay profiled through interpolated ones had its least chi-square half a row off).
 /// 5. The standard deviation: the profile's, where the total chi-square rises by the fit's
-///    reduced chi-square (at least 1), its variance scaled by [`correlation_inflation`], with
-///    [`ROW_RESOLUTION`] of a row added in quadrature.
+///    reduced chi-square (at least 1), its variance scaled by [`correlation_inflation`]; the
+///    vertex's own from the points' scatter about the parabola; and [`ROW_RESOLUTION`] of a
+///    row, all in quadrature.
 pub fn fit_force_delay(
     reduced: &ReducedLog,
     noise: &SensorNoise,
@@ -163,38 +228,58 @@ pub fn fit_force_delay(
             }
         }
     }
-    // The fraction: the vertex of the parabola through the best row and its neighbours.
-    let at = |rows: i64, trials: &[DelayTrial]| {
-        trials
+    // The fraction: the vertex of the least-squares parabola through the rows within
+    // LOCAL_ROWS of the best (re-centred once where the vertex lies beyond a row of it).
+    let mut vertex = None;
+    for _ in 0..2 {
+        let have: Vec<i64> = trials
             .iter()
-            .rev()
-            .find(|t| (t.delay_s / dt - rows as f64).abs() < 1e-6)
-            .and_then(|t| t.reduced_chi2)
-            .unwrap_or(f64::INFINITY)
+            .map(|t| (t.delay_s / dt).round() as i64)
+            .collect();
+        let missing: Vec<i64> = (best - LOCAL_ROWS..=best + LOCAL_ROWS)
+            .filter(|d| !have.contains(d))
+            .collect();
+        if !missing.is_empty() {
+            scan(missing, window, &mut trials);
+        }
+        let points: Vec<(f64, f64)> = (best - LOCAL_ROWS..=best + LOCAL_ROWS)
+            .filter_map(|d| {
+                trials
+                    .iter()
+                    .rev()
+                    .find(|t| (t.delay_s / dt).round() as i64 == d)
+                    .and_then(|t| t.reduced_chi2)
+                    .map(|f| ((d - best) as f64, f))
+            })
+            .collect();
+        let fit = local_parabola(&points)
+            .ok_or(IdentifyError::ForceDelayUndetermined { window_s: window })?;
+        let shifted = fit.vertex.round() as i64;
+        vertex = Some((best, fit));
+        if shifted == 0 || (best + shifted).abs() >= limit {
+            break;
+        }
+        best += shifted;
+    }
+    let Some((best, fit)) = vertex else {
+        return Err(IdentifyError::ForceDelayUndetermined { window_s: window });
     };
-    let (fm, f0, fp) = (
-        at(best - 1, &trials),
-        at(best, &trials),
-        at(best + 1, &trials),
-    );
-    let curvature = fm - 2.0 * f0 + fp;
+    let rows = best as f64 + fit.vertex.clamp(-(LOCAL_ROWS as f64), LOCAL_ROWS as f64);
     let (log, timed) = retime_reduced(reduced, noise, best as f64 * dt);
     let (dof, inflation) = identify_reduced(&log, &timed, Some(window))
         .map(|id| (id.dynamic_samples as f64, correlation_inflation(&id)))
         .unwrap_or((0.0, 1.0));
-    let (rows, std_rows) = if curvature > 0.0 && curvature.is_finite() && dof > 0.0 {
-        let shift = ((fm - fp) / (2.0 * curvature)).clamp(-0.5, 0.5);
-        // The total chi-square, dof times the reduced one, rises by the fit's reduced
-        // chi-square (at least 1) at one standard deviation; the parabola through whole rows
-        // places the fraction no better than a row allows (a uniform error over a row).
-        let profile = (2.0 * f0.max(1.0) * inflation / (curvature * dof)).sqrt();
-        (
-            best as f64 + shift,
-            Some((profile * profile + ROW_RESOLUTION * ROW_RESOLUTION).sqrt()),
-        )
-    } else {
-        (best as f64, None)
-    };
+    if dof <= 0.0 {
+        return Err(IdentifyError::ForceDelayUndetermined { window_s: window });
+    }
+    // The total chi-square, dof times the reduced one, rises by the fit's reduced chi-square
+    // (at least 1, scaled by the residuals' correlation) at one standard deviation.
+    let profile = (fit.least.max(1.0) * inflation / (fit.curvature * dof)).sqrt();
+    let std_rows = (profile.powi(2) + fit.vertex_std.powi(2) + ROW_RESOLUTION.powi(2)).sqrt();
+    if std_rows * dt > UNDETERMINED_STD_S {
+        return Err(IdentifyError::ForceDelayUndetermined { window_s: window });
+    }
+    let std_rows = Some(std_rows);
     trials.sort_by(|a, b| a.delay_s.total_cmp(&b.delay_s));
     Ok(ForceDelayFit {
         delay_s: rows * dt,
@@ -202,7 +287,65 @@ pub fn fit_force_delay(
         fitted: true,
         window_s: Some(window),
         trials,
+        parameter_std: Default::default(),
     })
+}
+
+/// Carries a fitted delay's standard deviation into `id`, identified on `reduced` re-timed by
+/// the delay: `reduced` is identified again (the window held at `id`'s) re-timed by the delay
+/// plus and minus its standard deviation, and half of each parameter's change is added to its
+/// standard deviation in quadrature, and to the covariance as the outer product. A small
+/// error in the delay moves m by d1 times it and d1 by the stiffness times it, which on a
+/// precisely known m is many of its standard deviations (on the independent rig's heavy
+/// transmission, a delay 7 ms off put m at z -5.4).
+pub fn carry_delay_uncertainty(
+    id: &mut Identification,
+    reduced: &ReducedLog,
+    noise: &SensorNoise,
+    fit: &mut ForceDelayFit,
+) {
+    use super::identify::Param;
+    let Some(std) = fit.std_s.filter(|s| *s > 0.0 && fit.fitted) else {
+        return;
+    };
+    let at = |delay_s: f64| {
+        let (log, timed) = retime_reduced(reduced, noise, delay_s);
+        identify_reduced(&log, &timed, Some(id.sg_window_s)).ok()
+    };
+    let (Some(plus), Some(minus)) = (at(fit.delay_s + std), at(fit.delay_s - std)) else {
+        return;
+    };
+    let mut change = [0.0; 7];
+    for p in Param::ALL {
+        if let (Some(a), Some(b), Some(s)) = (
+            plus.parameters.value(p),
+            minus.parameters.value(p),
+            id.parameters.get(p).std,
+        ) {
+            let c = 0.5 * (a - b);
+            if c.is_finite() {
+                change[p.index()] = c;
+                id.parameters.set_std(p, s.hypot(c));
+                fit.parameter_std.insert(p.key(), c.abs());
+            }
+        }
+    }
+    let names = id.covariance_parameters.clone();
+    let index = |name: &str| {
+        Param::ALL
+            .iter()
+            .find(|p| p.key() == name)
+            .map(|p| p.index())
+    };
+    for (i, a) in names.iter().enumerate() {
+        for (j, b) in names.iter().enumerate() {
+            if let (Some(pa), Some(pb)) = (index(a), index(b)) {
+                if let Some(v) = id.covariance.get_mut(i).and_then(|r| r.get_mut(j)) {
+                    *v += change[pa] * change[pb];
+                }
+            }
+        }
+    }
 }
 
 /// How much the residuals' correlation widens a velocity-like parameter beyond what the
@@ -576,6 +719,32 @@ mod tests {
         let out = retime_log(&log, RowDelay::new(0.5));
         let var = out.force_n.iter().map(|f| f * f).sum::<f64>() / out.len() as f64;
         assert!((var / half - 1.0).abs() < 0.02, "{var} against {half}");
+    }
+
+    #[test]
+    fn the_profiles_parabola_finds_its_vertex_and_how_well_the_points_fix_it() {
+        let exact: Vec<(f64, f64)> = (-3..=3)
+            .map(|u| (u as f64, 1.0 + 0.01 * (u as f64 - 0.4).powi(2)))
+            .collect();
+        let p = local_parabola(&exact).expect("curves upward");
+        assert!((p.vertex - 0.4).abs() < 1e-9, "{p:?}");
+        assert!((p.curvature - 0.01).abs() < 1e-12 && (p.least - 1.0).abs() < 1e-12);
+        assert!(p.vertex_std < 1e-6, "{p:?}");
+        // Odd and even rows apart by more than the curvature over a row: the vertex stays
+        // near, and its standard deviation says how loosely the points fix it.
+        let jagged: Vec<(f64, f64)> = exact
+            .iter()
+            .map(|&(u, f)| (u, f + if (u as i64) % 2 == 0 { 0.0 } else { 0.012 }))
+            .collect();
+        let q = local_parabola(&jagged).expect("curves upward");
+        assert!((q.vertex - 0.4).abs() < 3.0 * q.vertex_std, "{q:?}");
+        assert!(q.vertex_std > 0.05, "{q:?}");
+        // A flat or downward profile determines nothing.
+        let flat: Vec<(f64, f64)> = (-3..=3)
+            .map(|u| (u as f64, 1.0 - 0.001 * (u * u) as f64))
+            .collect();
+        assert!(local_parabola(&flat).is_none());
+        assert!(local_parabola(&exact[..3]).is_none());
     }
 
     #[test]

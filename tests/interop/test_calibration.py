@@ -1027,8 +1027,10 @@ def test_a_force_read_late_is_fitted_and_re_timed(tmp_path, seed):
     assert abs(d["delay_s"] - 0.015) < 3.0 * d["std_s"], d
     for key, value in truth:
         assert abs(z(j["parameters"], key, value)) < 3.0, (key, j["parameters"])
+    # The delay's uncertainty is carried into m's and d1's standard deviations.
+    assert d["parameter_std"]["m_n_s2_per_mm"] > 0 and d["parameter_std"]["d1_n_s_per_mm"] > 0, d
     given = json.loads(camspring("identify", log, "--json", "--force-delay", "15ms").stdout)
-    assert given["force_delay"] == {"delay_s": 0.015, "std_s": None, "fitted": False, "window_s": None, "trials": []}
+    assert given["force_delay"] == {"delay_s": 0.015, "std_s": None, "fitted": False, "window_s": None, "trials": [], "parameter_std": {}}
     for key, value in truth:
         assert abs(z(given["parameters"], key, value)) < 3.0, (key, given["parameters"])
 
@@ -1084,3 +1086,19 @@ def test_estimate_validate_and_diagnose_re_time_a_force_read_late(tmp_path):
     assert after["force_delay"]["fitted"], after["force_delay"]
     assert after["force_error_after_percent"] < 0.5 * before["force_error_after_percent"], (
         before["force_error_after_percent"], after["force_error_after_percent"])
+
+
+def test_a_log_that_does_not_determine_the_force_delay_says_so(tmp_path):
+    """The heavy transmission (m 0.25, d1 1.5) read 15 ms late, seed 3: identification's
+    chi-square hardly changes as the force is re-timed, so the least-squares parabola through
+    the profile fixes no delay (its standard deviation came to 146 s before this was refused).
+    `--force-delay auto` is an error that says the log does not determine the delay and how to
+    give it, not a delay applied at random."""
+    tr = Transmission(m=0.25, d0=2.0, d1=1.5, d2=-0.008)
+    t, f, x, _ = run(tr, Rig(seed=3, rate_hz=1000.0), "multisine", 300.0)
+    i = np.arange((len(t) - 16) // 10) * 10
+    log = tmp_path / "late.tsv"
+    write_rig_log(log, t[i + 15], f[i], x[i + 15], style="tab")
+    r = camspring("identify", log, "--force-delay", "auto")
+    assert r.returncode == 2, r.stdout[-2000:]
+    assert "does not determine the force channel's delay" in r.stderr and "--force-delay" in r.stderr, r.stderr
