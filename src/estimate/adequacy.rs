@@ -68,7 +68,9 @@ impl Adequacy {
                 if coloured {
                     "they are also correlated over time, so the likely cause is a force the model lacks \
                      (friction that is not Coulomb, hysteresis, a law that is not exponential, a slipping \
-                     encoder) or a filter window too long for the motion"
+                     encoder), a force read at another instant than the position (channels scanned in \
+                     turn, a converter's filter: try --force-delay auto) or a filter window too long \
+                     for the motion"
                 } else {
                     "they are white, so the likely cause is a noise model smaller than the sensors' noise: \
                      measure it with `camspring noise` on a log at rest and pass --noise"
@@ -85,8 +87,9 @@ impl Adequacy {
             reasons.push(format!(
                 "the residuals are correlated beyond one filter window (whiteness statistic {:.1} over \
                  {} lags, p = {:.1e} < {WHITENESS_LEVEL}): the model leaves a slow force unexplained \
-                 (friction that is not Coulomb, hysteresis, drift, or a filter window too long for the \
-                 motion)",
+                 (friction that is not Coulomb, hysteresis, drift, a force read at another instant \
+                 than the position, which --force-delay auto fits, or a filter window too long for \
+                 the motion)",
                 w.statistic, w.lags, w.p_value
             ));
         }

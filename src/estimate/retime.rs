@@ -79,6 +79,10 @@ pub const SEARCH_S: f64 = 0.25;
 /// over a row, 1/sqrt(12).
 pub const ROW_RESOLUTION: f64 = 0.288_675_134_594_812_9;
 
+/// The most rows of identification's samples (block means at 100 to 200 Hz) the delay's
+/// profile is taken over: 20 minutes at 100 Hz.
+pub const PROFILE_ROWS: usize = 120_000;
+
 /// A fitted delay's standard deviation (s) beyond which the log is said not to determine it.
 pub const UNDETERMINED_STD_S: f64 = 0.05;
 
@@ -155,20 +159,41 @@ pub const SEARCH_ROWS_MIN: i64 = 5;
 ///    [`LOCAL_ROWS`] of the best (a profile can alternate between odd and even rows by more
 ///    than its curvature over a row; the parabola averages that). A parabola that does not
 ///    curve upward is an error: the log does not determine the delay. Interpolated delays
-///    are not compared: the interpolation lowers the force
-///    noise between rows (by up to 14 %), which moves the reduced chi-square more than a
-///    fraction of a row of delay does (on the independent rig's multisine at 100 Hz, a 10 ms
-///    delay profiled through interpolated ones had its least chi-square half a row off).
+///    are not compared: the interpolation lowers the force noise between rows (by up to
+///    14 %), which moves the reduced chi-square more than a fraction of a row of delay does
+///    (on the independent rig's multisine at 100 Hz, a 10 ms delay profiled through
+///    interpolated ones had its least chi-square half a row off).
 /// 5. The standard deviation: the profile's, where the total chi-square rises by the fit's
 ///    reduced chi-square (at least 1), its variance scaled by [`correlation_inflation`]; the
 ///    vertex's own from the points' scatter about the parabola; and [`ROW_RESOLUTION`] of a
-///    row, all in quadrature.
+///    row, all in quadrature. One beyond [`UNDETERMINED_STD_S`] is an error too.
+/// 6. The profile is taken over the first [`PROFILE_ROWS`] rows (the delay is the rig's), so
+///    that its identifications are bounded on a day-long log.
 pub fn fit_force_delay(
     reduced: &ReducedLog,
     noise: &SensorNoise,
     window_s: Option<f64>,
 ) -> Result<ForceDelayFit, IdentifyError> {
     use rayon::prelude::*;
+    // The delay is the rig's: the first PROFILE_ROWS rows determine it as well as a day does,
+    // and each of the profile's identifications is then bounded.
+    let head;
+    let reduced = if reduced.log.len() > PROFILE_ROWS {
+        let log = &reduced.log;
+        head = ReducedLog {
+            log: CalibrationLog {
+                t_s: log.t_s[..PROFILE_ROWS].to_vec(),
+                force_n: log.force_n[..PROFILE_ROWS].to_vec(),
+                position_mm: log.position_mm[..PROFILE_ROWS].to_vec(),
+                ..CalibrationLog::default()
+            },
+            block: reduced.block,
+            log_samples: PROFILE_ROWS * reduced.block,
+        };
+        &head
+    } else {
+        reduced
+    };
     let dt = reduced.log.dt_s();
     let first = identify_reduced(reduced, noise, window_s)?;
     let mut window = window_s.unwrap_or(first.sg_window_s);

@@ -472,7 +472,12 @@ pub fn validation_html(
         ));
     }
     h.push_str("<h2>Measured force against deflection</h2>\n");
-    coverage_paragraph(&mut h, v.coverage.as_ref(), v.position_offset_mm);
+    coverage_paragraph(
+        &mut h,
+        v.coverage.as_ref(),
+        v.position_offset_mm,
+        v.force_delay.as_ref(),
+    );
     h.push_str(&figure(
         force_svg,
         "The log's quasi-static force (inertia, damping and Coulomb friction fitted and taken out, \
@@ -489,11 +494,25 @@ fn coverage_paragraph(
     h: &mut String,
     c: Option<&crate::verdict::validate::Coverage>,
     offset: Option<f64>,
+    delay: Option<&crate::estimate::retime::ForceDelayFit>,
 ) {
     if let Some(o) = offset {
         let _ = writeln!(
             h,
             "<p>Encoder zero: {o:+.3} mm taken out of the logged positions.</p>"
+        );
+    }
+    if let Some(d) = delay {
+        let late = if d.delay_s >= 0.0 { "after" } else { "before" };
+        let how = match d.std_s {
+            Some(s) if d.fitted => format!(" (+- {:.2} ms, fitted by identification)", s * 1e3),
+            _ => " (as given)".to_owned(),
+        };
+        let _ = writeln!(
+            h,
+            "<p>Force channel: read {:.2} ms {late} the position{how}; each force was re-timed \
+             to its position's instant before judging.</p>",
+            d.delay_s.abs() * 1e3
         );
     }
     if let Some(c) = c {
@@ -545,7 +564,12 @@ pub fn curve_validation_html(
         "Left: the measured force with the dynamics removed, binned, and the designed law. \
          Right: the relative deviation per bin and the tolerance.",
     ));
-    coverage_paragraph(&mut h, v.coverage.as_ref(), v.position_offset_mm);
+    coverage_paragraph(
+        &mut h,
+        v.coverage.as_ref(),
+        v.position_offset_mm,
+        v.force_delay.as_ref(),
+    );
     h.push_str(diagnosis_html);
     h.push_str("</body></html>\n");
     h
