@@ -456,18 +456,12 @@ pub fn run_identify(
     window_s: Option<f64>,
     force_delay: ForceDelay,
 ) -> Result<IdentifyRun> {
-    use crate::estimate::retime::{
-        carry_delay_uncertainty, fit_force_delay, retime_reduced, ForceDelayFit,
-    };
+    use crate::estimate::retime::{carry_delay_uncertainty, fit_force_delay, retime_reduced};
     let surveyed = survey_log_file(log_path, map, sampling_tolerance, f64::INFINITY)?;
     let mut noise = noise.resolve(surveyed.noise.as_ref());
     warn_noise(log_path, &noise);
-    let delay = match force_delay {
-        ForceDelay::None => None,
-        ForceDelay::Seconds(s) => Some(ForceDelayFit::given(s)),
-        ForceDelay::Auto => Some(fit_force_delay(&surveyed.reduced, &noise.noise, window_s)?),
-    };
-    let mut delay = delay;
+    let mut delay =
+        force_delay.resolve(|| fit_force_delay(&surveyed.reduced, &noise.noise, window_s))?;
     let identification = match &mut delay {
         None => {
             crate::estimate::identify::identify_reduced(&surveyed.reduced, &noise.noise, window_s)?
@@ -512,33 +506,23 @@ fn retime_in_memory(
     window_s: Option<f64>,
 ) -> Result<Option<crate::estimate::retime::ForceDelayFit>> {
     use crate::estimate::identify::{Reduction, MAX_IDENTIFY_SAMPLES};
-    use crate::estimate::retime::{
-        fit_force_delay, retime_log, ForceDelayFit, RowDelay, MAX_FORCE_DELAY_ROWS,
-    };
-    let delay = match force_delay {
-        ForceDelay::None => return Ok(None),
-        ForceDelay::Seconds(s) => ForceDelayFit::given(s),
-        ForceDelay::Auto => {
-            let mut reduction = Reduction::new(MAX_IDENTIFY_SAMPLES);
-            for i in 0..log.len() {
-                reduction.push(crate::estimate::log::Sample {
-                    t_s: log.t_s[i],
-                    force_n: log.force_n[i],
-                    position_mm: log.position_mm[i],
-                });
-            }
-            fit_force_delay(&reduction.finish(), noise, window_s)?
+    use crate::estimate::retime::{fit_force_delay, retime_log, RowDelay};
+    let Some(delay) = force_delay.resolve(|| {
+        let mut reduction = Reduction::new(MAX_IDENTIFY_SAMPLES);
+        for i in 0..log.len() {
+            reduction.push(crate::estimate::log::Sample {
+                t_s: log.t_s[i],
+                force_n: log.force_n[i],
+                position_mm: log.position_mm[i],
+            });
         }
+        fit_force_delay(&reduction.finish(), noise, window_s)
+    })?
+    else {
+        return Ok(None);
     };
-    let rows = delay.delay_s / log.dt_s();
-    if rows.is_nan() || rows.abs() > MAX_FORCE_DELAY_ROWS {
-        return Err(Error::Argument(format!(
-            "--force-delay: {:.3} s is {rows:.0} samples of this log; at most \
-             {MAX_FORCE_DELAY_ROWS:.0} are held while the force is re-timed",
-            delay.delay_s
-        )));
-    }
-    let rows = RowDelay::new(rows);
+    let rows = RowDelay::of_log(delay.delay_s, log.dt_s())
+        .map_err(|e| Error::Argument(format!("--force-delay: {e}")))?;
     noise.force_variance_n2 *= rows.noise_variance_factor();
     *log = retime_log(log, rows);
     Ok(Some(delay))

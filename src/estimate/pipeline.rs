@@ -19,7 +19,7 @@ use super::log::{CalibrationLog, LogError, Sample};
 use super::noise::{GivenNoise, LogNoise, LogNoiseSurvey, ResolvedNoise};
 use super::retime::{
     carry_delay_uncertainty, fit_force_delay, retime_reduced, ForceDelay, ForceDelayFit,
-    ForceRetimer, RowDelay, MAX_FORCE_DELAY_ROWS,
+    ForceRetimer, RowDelay,
 };
 use super::sg;
 use super::twin::{self, TwinBias, TwinSource, TwinTruth};
@@ -997,22 +997,12 @@ where
     // The force channel's delay behind the position: given or fitted on identification's
     // samples, and the force re-timed to its position's instant in every pass (the survey's
     // identification samples included). The force noise is what the interpolation leaves.
-    let force_delay = match opts.force_delay {
-        ForceDelay::None => None,
-        ForceDelay::Seconds(s) => Some(ForceDelayFit::given(s)),
-        ForceDelay::Auto => Some(fit_force_delay(&survey.reduced, noise, opts.window_s)?),
-    };
-    let delay_rows = force_delay.as_ref().map_or(0.0, |d| d.delay_s) / survey.dt_s;
-    if delay_rows.abs() > MAX_FORCE_DELAY_ROWS {
-        return Err(EkfError::Input(format!(
-            "a force delay of {delay_rows:.0} samples; at most {MAX_FORCE_DELAY_ROWS:.0} are \
-             held while the force is re-timed"
-        ))
-        .into());
-    }
-    let row_delay = RowDelay::new(delay_rows);
+    let mut force_delay = opts
+        .force_delay
+        .resolve(|| fit_force_delay(&survey.reduced, noise, opts.window_s))?;
+    let row_delay = RowDelay::of_log(force_delay.as_ref().map_or(0.0, |d| d.delay_s), survey.dt_s)
+        .map_err(EkfError::Input)?;
     let (raw_reduced, raw_noise) = (&survey.reduced, noise);
-    let mut force_delay = force_delay;
     let (timed_survey, timed_noise);
     let (survey, noise) = match &force_delay {
         None => (survey, noise),

@@ -8,8 +8,8 @@
 //! [`KERNEL_TAPS`] taps (flat within 1 % up to 0.78 of the Nyquist frequency, far above any
 //! motion a spring rig makes). The rows at the log's ends that lack a partner are left out.
 //! The interpolation passes white force noise with the variance factor
-//! [`noise_variance_factor`] (0.86 half-way between rows, 1 on a row), which identification
-//! weights with.
+//! [`RowDelay::noise_variance_factor`] (0.86 half-way between rows, 1 on a row), which
+//! identification weights with.
 
 use std::collections::VecDeque;
 
@@ -28,6 +28,21 @@ pub enum ForceDelay {
     Seconds(f64),
     /// Fitted by identification ([`fit_force_delay`]).
     Auto,
+}
+
+impl ForceDelay {
+    /// The delay to apply: none, as given, or what `fit` finds ([`fit_force_delay`], called
+    /// only for [`ForceDelay::Auto`]).
+    pub fn resolve(
+        self,
+        fit: impl FnOnce() -> Result<ForceDelayFit, IdentifyError>,
+    ) -> Result<Option<ForceDelayFit>, IdentifyError> {
+        Ok(match self {
+            ForceDelay::None => None,
+            ForceDelay::Seconds(s) => Some(ForceDelayFit::given(s)),
+            ForceDelay::Auto => Some(fit()?),
+        })
+    }
 }
 
 /// One delay the profile of [`fit_force_delay`] tried.
@@ -468,6 +483,19 @@ pub struct RowDelay {
 }
 
 impl RowDelay {
+    /// The delay of `delay_s` in a log sampled every `dt_s`, or why it cannot be held: more
+    /// than [`MAX_FORCE_DELAY_ROWS`] rows.
+    pub fn of_log(delay_s: f64, dt_s: f64) -> Result<RowDelay, String> {
+        let rows = delay_s / dt_s;
+        if rows.is_nan() || rows.abs() > MAX_FORCE_DELAY_ROWS {
+            return Err(format!(
+                "a force delay of {delay_s:.3} s is {rows:.0} samples of this log; at most \
+                 {MAX_FORCE_DELAY_ROWS:.0} are held while the force is re-timed"
+            ));
+        }
+        Ok(RowDelay::new(rows))
+    }
+
     /// The delay of `rows` (finite, |rows| at most [`MAX_FORCE_DELAY_ROWS`]).
     pub fn new(rows: f64) -> RowDelay {
         let rows = if rows.is_finite() {
@@ -505,11 +533,6 @@ impl RowDelay {
         let after = (self.whole + last).max(0).unsigned_abs();
         (before + after) as usize
     }
-}
-
-/// The factor on a white force noise's variance after re-timing by `rows`.
-pub fn noise_variance_factor(rows: f64) -> f64 {
-    RowDelay::new(rows).noise_variance_factor()
 }
 
 /// The weights, at offsets 1 - [`KERNEL_HALF`] ..= [`KERNEL_HALF`] from the row before, of the
@@ -719,8 +742,8 @@ mod tests {
 
     #[test]
     fn the_noise_factor_is_the_kernels_sum_of_squares() {
-        assert_eq!(noise_variance_factor(2.0), 1.0);
-        let half = noise_variance_factor(0.5);
+        assert_eq!(RowDelay::new(2.0).noise_variance_factor(), 1.0);
+        let half = RowDelay::new(0.5).noise_variance_factor();
         assert!((0.83..0.9).contains(&half), "{half}");
         // White noise through the kernel has that variance.
         let mut state = 12345u64;
