@@ -521,6 +521,18 @@ pub enum IdentifyError {
         /// The search's limit (s).
         limit_s: f64,
     },
+    /// Produced by [`super::retime::fit_force_delay`] on a log too short to fit the delay.
+    #[error(
+        "a log of {log_s:.1} s is too short to fit the force channel's delay (at least \
+         {min_s:.1} s: ten filter windows, and forty times the delays searched either way); \
+         give it with --force-delay, e.g. 5ms, or record a longer run"
+    )]
+    ForceDelayLogTooShort {
+        /// The log's length (s).
+        log_s: f64,
+        /// The least length (s).
+        min_s: f64,
+    },
     /// Produced by [`super::retime::fit_force_delay`] when the fit's chi-square does not
     /// curve upward about its least value: the log does not determine the delay.
     #[error(

@@ -98,6 +98,12 @@ pub const ROW_RESOLUTION: f64 = 0.288_675_134_594_812_9;
 /// profile is taken over: 20 minutes at 100 Hz.
 pub const PROFILE_ROWS: usize = 120_000;
 
+/// The fewest filter windows a log must span for its delay to be fitted.
+pub const MIN_PROFILE_WINDOWS: f64 = 10.0;
+
+/// The fewest times the searched rows either side a log must span for its delay to be fitted.
+pub const MIN_PROFILE_SEARCHES: i64 = 40;
+
 /// A fitted delay's standard deviation (s) beyond which the log is said not to determine it.
 pub const UNDETERMINED_STD_S: f64 = 0.05;
 
@@ -183,7 +189,9 @@ pub const SEARCH_ROWS_MIN: i64 = 5;
 ///    vertex's own from the points' scatter about the parabola; and [`ROW_RESOLUTION`] of a
 ///    row, all in quadrature. One beyond [`UNDETERMINED_STD_S`] is an error too.
 /// 6. The profile is taken over the first [`PROFILE_ROWS`] rows (the delay is the rig's), so
-///    that its identifications are bounded on a day-long log.
+///    that its identifications are bounded on a day-long log. A log shorter than
+///    [`MIN_PROFILE_WINDOWS`] windows or [`MIN_PROFILE_SEARCHES`] times the rows searched
+///    either way is an error.
 pub fn fit_force_delay(
     reduced: &ReducedLog,
     noise: &SensorNoise,
@@ -213,6 +221,16 @@ pub fn fit_force_delay(
     let first = identify_reduced(reduced, noise, window_s)?;
     let mut window = window_s.unwrap_or(first.sg_window_s);
     let limit = ((SEARCH_S / dt).ceil() as i64).max(SEARCH_ROWS_MIN);
+    // On a log a few windows long, re-pairing shifts a large share of it out at the ends, and
+    // the profile follows that rather than the delay (a 4 s log put a 15 ms delay at
+    // 177 +- 36 ms).
+    let min_rows = (MIN_PROFILE_WINDOWS * window / dt).max((MIN_PROFILE_SEARCHES * limit) as f64);
+    if (reduced.log.len() as f64) < min_rows {
+        return Err(IdentifyError::ForceDelayLogTooShort {
+            log_s: reduced.log.len() as f64 * dt,
+            min_s: min_rows * dt,
+        });
+    }
     let profile = |rows: f64, window: f64| -> Option<(f64, usize)> {
         let (log, noise) = retime_reduced(reduced, noise, rows * dt);
         identify_reduced(&log, &noise, Some(window))

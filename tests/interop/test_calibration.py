@@ -1102,3 +1102,18 @@ def test_a_log_that_does_not_determine_the_force_delay_says_so(tmp_path):
     r = camspring("identify", log, "--force-delay", "auto")
     assert r.returncode == 2, r.stdout[-2000:]
     assert "does not determine the force channel's delay" in r.stderr and "--force-delay" in r.stderr, r.stderr
+
+
+def test_a_log_too_short_for_the_force_delay_says_so(tmp_path):
+    """A 4 s log of the default transmission read 15 ms late: re-pairing shifts a large share
+    of it out at the ends, and the profile followed that (177 +- 36 ms). Fitting the delay
+    needs ten filter windows and forty times the delays searched; a shorter log is an error
+    that says so and how to give the delay."""
+    tr = Transmission(m=0.05, d0=0.0, d1=0.2, d2=-1e-4)
+    t, f, x, _ = run(tr, Rig(seed=4, rate_hz=1000.0), "multisine", 4.2)
+    i = np.arange((len(t) - 16) // 10) * 10
+    log = tmp_path / "short.tsv"
+    write_rig_log(log, t[i + 15], f[i], x[i + 15], style="tab")
+    r = camspring("identify", log, "--force-delay", "auto")
+    assert r.returncode == 2, r.stdout[-2000:]
+    assert "too short to fit the force channel's delay" in r.stderr and "--force-delay" in r.stderr, r.stderr
