@@ -1117,3 +1117,29 @@ def test_a_log_too_short_for_the_force_delay_says_so(tmp_path):
     r = camspring("identify", log, "--force-delay", "auto")
     assert r.returncode == 2, r.stdout[-2000:]
     assert "too short to fit the force channel's delay" in r.stderr and "--force-delay" in r.stderr, r.stderr
+
+
+@pytest.mark.parametrize("i", [2, 3])
+def test_a_fine_encoders_log_read_with_the_force_late_is_re_timed(tmp_path, i):
+    """Encoder draws 2 (an S-curve at 500 Hz) and 3 (force control at 200 Hz), logged with the
+    force two samples after the position (4 and 10 ms). A fine encoder's precise positions
+    expose the delay: read as logged, m came out at z -12.8 and -14.6 (d1 at -9.2 on draw 3),
+    reported as a fit. With `--force-delay auto` the delay is within three of its standard
+    deviations and m, d1 and k2 within three of theirs."""
+    tr, profile, rig, _ = encoder_draw(i, 0.0)
+    t, f, x, _ = run(tr, rig, profile, 300.0)
+    lag = 2
+    log = tmp_path / f"encoder{i}-late.tsv"
+    write_rig_log(log, t[:-lag], f[:-lag], x[lag:], style="tab")
+    truth = [("m_n_s2_per_mm", tr.m), ("d1_n_s_per_mm", tr.d1), ("k2_per_mm", tr.k2)]
+    plain = json.loads(camspring("identify", log, "--json").stdout)["parameters"]
+    zp = (plain["m_n_s2_per_mm"] - tr.m) / plain["m_n_s2_per_mm_std"]
+    assert zp < -5.0, plain
+    auto = camspring("identify", log, "--json", "--force-delay", "auto")
+    assert auto.returncode == 0, auto.stderr
+    j = json.loads(auto.stdout)
+    d = j["force_delay"]
+    assert abs(d["delay_s"] - lag / rig.rate_hz) < 3.0 * d["std_s"], d
+    p = j["parameters"]
+    for key, value in truth:
+        assert abs(p[key] - value) < 3.0 * p[f"{key}_std"], (key, p[key], p[f"{key}_std"], value)
