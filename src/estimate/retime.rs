@@ -419,15 +419,9 @@ pub fn correlation_inflation(id: &super::identify::Identification) -> f64 {
     let Some(i) = names.iter().position(|n| n == Param::D1.key()) else {
         return 1.0;
     };
-    // The paper's covariance is over X = [m, d0, d1, d2, mu, F0], the identifiable ones.
-    let x = [
-        Param::M,
-        Param::D0,
-        Param::D1,
-        Param::D2,
-        Param::Mu,
-        Param::F0,
-    ];
+    // The paper's covariance is over X = [m, d0, d1, d2, mu, F0] (every parameter but k2, in
+    // model order), the identifiable ones.
+    let x = &Param::ALL[..Param::K2.index()];
     let Some(j) = x
         .iter()
         .filter(|p| names.iter().any(|n| n == p.key()))

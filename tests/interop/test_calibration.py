@@ -998,6 +998,17 @@ def test_the_filters_bias_shows_in_the_longer_windows_change(tmp_path, i):
     fitting_sweep_draw(tmp_path, i)
 
 
+def late_log(tmp_path, tr, seed, lag_ms, seconds=300.0, name="late.tsv"):
+    """A log of `tr` from the independent rig sampled at 1 kHz and logged at 100 Hz with the
+    load cell read `lag_ms` after the encoder (each row's force is from lag_ms before its
+    time)."""
+    t, f, x, _ = run(tr, Rig(seed=seed, rate_hz=1000.0), "multisine", seconds)
+    i = np.arange((len(t) - lag_ms - 1) // 10) * 10
+    log = tmp_path / name
+    write_rig_log(log, t[i + lag_ms], f[i], x[i + lag_ms], style="tab")
+    return log
+
+
 @pytest.mark.parametrize("seed", [3, 4])
 def test_a_force_read_late_is_fitted_and_re_timed(tmp_path, seed):
     """The default transmission's multisine (m 0.05, d1 0.2), sampled by the independent rig at
@@ -1007,11 +1018,7 @@ def test_a_force_read_late_is_fitted_and_re_timed(tmp_path, seed):
     deviations of 15 ms), re-times the force, and m, d1 and k2 come out within three of
     theirs; a given `--force-delay 15ms` does the same."""
     tr = Transmission(m=0.05, d0=0.0, d1=0.2, d2=-1e-4)
-    t, f, x, _ = run(tr, Rig(seed=seed, rate_hz=1000.0), "multisine", 300.0)
-    lag = 15
-    i = np.arange((len(t) - lag - 1) // 10) * 10
-    log = tmp_path / "late.tsv"
-    write_rig_log(log, t[i + lag], f[i], x[i + lag], style="tab")
+    log = late_log(tmp_path, tr, seed, 15)
     truth = [("m_n_s2_per_mm", tr.m), ("d1_n_s_per_mm", tr.d1), ("k2_per_mm", tr.k2)]
 
     def z(p, key, value):
@@ -1053,11 +1060,7 @@ def test_estimate_validate_and_diagnose_re_time_a_force_read_late(tmp_path):
     2 % (the filter's target), validate passes the true law and reports the delay, and the
     diagnosis leaves less than half the force it did unexplained."""
     tr = Transmission(m=0.05, d0=0.0, d1=0.2, d2=-1e-4)
-    t, f, x, _ = run(tr, Rig(seed=4, rate_hz=1000.0), "multisine", 300.0)
-    lag = 15
-    i = np.arange((len(t) - lag - 1) // 10) * 10
-    log = tmp_path / "late.tsv"
-    write_rig_log(log, t[i + lag], f[i], x[i + lag], style="tab")
+    log = late_log(tmp_path, tr, 4, 15)
     law = spec(tmp_path / "true.toml", tr, 1.0)
 
     def estimate(*extra):
@@ -1094,11 +1097,7 @@ def test_a_log_that_does_not_determine_the_force_delay_says_so(tmp_path):
     the profile fixes no delay (its standard deviation came to 146 s before this was refused).
     `--force-delay auto` is an error that says the log does not determine the delay and how to
     give it, not a delay applied at random."""
-    tr = Transmission(m=0.25, d0=2.0, d1=1.5, d2=-0.008)
-    t, f, x, _ = run(tr, Rig(seed=3, rate_hz=1000.0), "multisine", 300.0)
-    i = np.arange((len(t) - 16) // 10) * 10
-    log = tmp_path / "late.tsv"
-    write_rig_log(log, t[i + 15], f[i], x[i + 15], style="tab")
+    log = late_log(tmp_path, Transmission(m=0.25, d0=2.0, d1=1.5, d2=-0.008), 3, 15)
     r = camspring("identify", log, "--force-delay", "auto")
     assert r.returncode == 2, r.stdout[-2000:]
     assert "does not determine the force channel's delay" in r.stderr and "--force-delay" in r.stderr, r.stderr
@@ -1109,11 +1108,7 @@ def test_a_log_too_short_for_the_force_delay_says_so(tmp_path):
     of it out at the ends, and the profile followed that (177 +- 36 ms). Fitting the delay
     needs ten filter windows and forty times the delays searched; a shorter log is an error
     that says so and how to give the delay."""
-    tr = Transmission(m=0.05, d0=0.0, d1=0.2, d2=-1e-4)
-    t, f, x, _ = run(tr, Rig(seed=4, rate_hz=1000.0), "multisine", 4.2)
-    i = np.arange((len(t) - 16) // 10) * 10
-    log = tmp_path / "short.tsv"
-    write_rig_log(log, t[i + 15], f[i], x[i + 15], style="tab")
+    log = late_log(tmp_path, Transmission(m=0.05, d0=0.0, d1=0.2, d2=-1e-4), 4, 15, seconds=4.2)
     r = camspring("identify", log, "--force-delay", "auto")
     assert r.returncode == 2, r.stdout[-2000:]
     assert "too short to fit the force channel's delay" in r.stderr and "--force-delay" in r.stderr, r.stderr
