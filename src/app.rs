@@ -456,15 +456,24 @@ pub fn run_identify(
     window_s: Option<f64>,
     force_delay: ForceDelay,
 ) -> Result<IdentifyRun> {
-    use crate::estimate::retime::{carry_delay_uncertainty, fit_force_delay, retime_reduced};
+    use crate::estimate::retime::{
+        carry_delay_uncertainty, fit_force_delay, retime_reduced, screen_force_delay,
+    };
     let surveyed = survey_log_file(log_path, map, sampling_tolerance, f64::INFINITY)?;
     let mut noise = noise.resolve(surveyed.noise.as_ref());
     warn_noise(log_path, &noise);
     let mut delay =
         force_delay.resolve(|| fit_force_delay(&surveyed.reduced, &noise.noise, window_s))?;
+    let mut screen = None;
     let identification = match &mut delay {
         None => {
-            crate::estimate::identify::identify_reduced(&surveyed.reduced, &noise.noise, window_s)?
+            let id = crate::estimate::identify::identify_reduced(
+                &surveyed.reduced,
+                &noise.noise,
+                window_s,
+            )?;
+            screen = screen_force_delay(&surveyed.reduced, &noise.noise, &id);
+            id
         }
         Some(d) => {
             let (reduced, timed) = retime_reduced(&surveyed.reduced, &noise.noise, d.delay_s);
@@ -480,6 +489,7 @@ pub fn run_identify(
         sample_rate_hz: 1.0 / surveyed.dt_s,
         noise,
         force_delay: delay,
+        force_delay_screen: screen,
     })
 }
 
@@ -494,6 +504,8 @@ pub struct IdentifyRun {
     pub noise: crate::estimate::noise::ResolvedNoise,
     /// The force channel's delay the log was re-timed by, when it was.
     pub force_delay: Option<crate::estimate::retime::ForceDelayFit>,
+    /// Where no delay was asked for, what identification's profile says of one.
+    pub force_delay_screen: Option<crate::estimate::retime::ForceDelayScreen>,
 }
 
 /// Re-times the force of a log held in memory by the force channel's delay (given, or fitted

@@ -200,7 +200,7 @@ fn poor_excitation_names_the_parameters_this_log_cannot_identify() {
         ]
     );
     let noise = camspring::estimate::noise::GivenNoise::from(SensorNoise::default()).resolve(None);
-    let text = camspring::render::calibration::format_identification(&id, &noise, None);
+    let text = camspring::render::calibration::format_identification(&id, &noise, None, None);
     assert!(
         text.contains("not identifiable (poor excitation): d0_n, d2_n_s3_per_mm3, m_n_s2_per_mm"),
         "{text}"
@@ -971,4 +971,54 @@ fn a_long_windows_loss_of_acceleration_gain_is_taken_out_of_m() {
         uncorrected - truth_m > 5.0 * statistical,
         "{uncorrected} +- {statistical}"
     );
+}
+
+/// `log` with its load cell read `rows` samples after its encoder: each row keeps its time and
+/// position and takes the force of `rows` rows before.
+fn read_late(log: &CalibrationLog, rows: usize) -> CalibrationLog {
+    CalibrationLog {
+        t_s: log.t_s[rows..].to_vec(),
+        force_n: log.force_n[..log.len() - rows].to_vec(),
+        position_mm: log.position_mm[rows..].to_vec(),
+        ..CalibrationLog::default()
+    }
+}
+
+#[test]
+fn a_force_read_late_is_suspected_and_one_read_together_is_not() {
+    use camspring::estimate::identify::{identify_reduced, Reduction, MAX_IDENTIFY_SAMPLES};
+    use camspring::estimate::retime::screen_force_delay;
+    let reduce = |log: &CalibrationLog| {
+        let mut r = Reduction::new(MAX_IDENTIFY_SAMPLES);
+        for i in 0..log.len() {
+            r.push(camspring::estimate::log::Sample {
+                t_s: log.t_s[i],
+                force_n: log.force_n[i],
+                position_mm: log.position_mm[i],
+            });
+        }
+        r.finish()
+    };
+    let noise = SensorNoise::default();
+    for seed in 0..2 {
+        let (log, _) = run(Profile::Sines, 300.0, seed, 0.0);
+        for rows in [0, 2] {
+            let reduced = reduce(&read_late(&log, rows));
+            let id = identify_reduced(&reduced, &noise, None).unwrap();
+            let screen =
+                screen_force_delay(&reduced, &noise, &id).expect("a 300 s log is screened");
+            let delay_s = rows as f64 * 0.01;
+            // The screen's delay is within three of its standard deviations of the truth, and
+            // it is suspected exactly where there is one.
+            assert!(
+                (screen.delay_s - delay_s).abs() < 3.0 * screen.std_s,
+                "seed {seed}, {rows} rows: {screen:?}"
+            );
+            assert_eq!(
+                screen.suspected,
+                rows > 0,
+                "seed {seed}, {rows} rows: {screen:?}"
+            );
+        }
+    }
 }

@@ -18,8 +18,8 @@ use super::identify::{
 use super::log::{CalibrationLog, LogError, Sample};
 use super::noise::{GivenNoise, LogNoise, LogNoiseSurvey, ResolvedNoise};
 use super::retime::{
-    carry_delay_uncertainty, fit_force_delay, retime_reduced, ForceDelay, ForceDelayFit,
-    ForceRetimer, RowDelay,
+    carry_delay_uncertainty, fit_force_delay, retime_reduced, screen_force_delay, ForceDelay,
+    ForceDelayFit, ForceDelayScreen, ForceRetimer, RowDelay,
 };
 use super::sg;
 use super::twin::{self, TwinBias, TwinSource, TwinTruth};
@@ -178,6 +178,8 @@ pub struct EstimateRun {
     pub position_offset_mm: Option<f64>,
     /// The force channel's delay the force was re-timed by, when it was.
     pub force_delay: Option<ForceDelayFit>,
+    /// Where no delay was asked for and identification ran, what its profile says of one.
+    pub force_delay_screen: Option<ForceDelayScreen>,
     /// The filter's bias in its constants, measured on twins of the log and taken out of
     /// [`EkfRun::last`] (None: no twins, or no identification to simulate them from).
     pub twins: Option<TwinBias>,
@@ -1110,6 +1112,11 @@ where
             }
         }
     };
+    // Where no delay was asked for, whether the log looks read with its force late.
+    let force_delay_screen = match (&force_delay, &identification) {
+        (None, Some(id)) => screen_force_delay(reduced, noise, id),
+        _ => None,
+    };
     let dt = survey.dt_s;
     // The inertia's floor keeps the prediction stable: RK4 needs D dt / M and
     // sqrt(sigma / M) dt of order 1 or less, and an inertia below that cannot be resolved at
@@ -1425,6 +1432,7 @@ where
         consistency,
         position_offset_mm: (offset_mm != 0.0).then_some(offset_mm),
         force_delay,
+        force_delay_screen,
         twins,
         std_before_disagreement,
         noise: resolved,

@@ -160,8 +160,144 @@ fn local_parabola(points: &[(f64, f64)]) -> Option<Parabola> {
     })
 }
 
+/// The standard deviation (rows) of a profile's least value: the profile's own, where the
+/// total chi-square (`at`'s moving samples times the reduced one, `at` identified at the best
+/// row) rises by the fit's reduced chi-square (at least 1), its variance scaled by
+/// [`correlation_inflation`]; the vertex's from the points' scatter about the parabola; and
+/// [`ROW_RESOLUTION`] of a row; all in quadrature. None without moving samples.
+fn vertex_std_rows(fit: &Parabola, at: &RowFit) -> Option<f64> {
+    if at.dof <= 0.0 {
+        return None;
+    }
+    let profile = (fit.least.max(1.0) * at.inflation / (fit.curvature * at.dof)).sqrt();
+    Some((profile.powi(2) + fit.vertex_std.powi(2) + ROW_RESOLUTION.powi(2)).sqrt())
+}
+
+/// Identification at one whole-row delay.
+#[derive(Debug, Clone, Copy)]
+struct RowFit {
+    /// Its reduced chi-square.
+    chi2: f64,
+    /// Its moving samples.
+    dof: f64,
+    /// Its [`correlation_inflation`].
+    inflation: f64,
+}
+
+/// Identification's reduced chi-square over whole-row delays of one log, the filter window
+/// held: each an exact re-pairing of the readings.
+struct DelayProfile<'a> {
+    reduced: &'a ReducedLog,
+    noise: &'a SensorNoise,
+    dt: f64,
+    window: f64,
+    /// The rows tried, in the order tried (None where identification failed).
+    tried: Vec<(i64, Option<RowFit>)>,
+}
+
+impl<'a> DelayProfile<'a> {
+    fn new(reduced: &'a ReducedLog, noise: &'a SensorNoise, window: f64) -> DelayProfile<'a> {
+        DelayProfile {
+            reduced,
+            noise,
+            dt: reduced.log.dt_s(),
+            window,
+            tried: Vec::new(),
+        }
+    }
+
+    /// Tries the whole-row delays `rows` (in parallel); the best of them and its reduced
+    /// chi-square (infinite where none fits).
+    fn scan(&mut self, rows: Vec<i64>) -> (i64, f64) {
+        use rayon::prelude::*;
+        let (reduced, noise, dt, window) = (self.reduced, self.noise, self.dt, self.window);
+        let found: Vec<(i64, Option<RowFit>)> = rows
+            .into_par_iter()
+            .map(|d| {
+                let (log, timed) = retime_reduced(reduced, noise, d as f64 * dt);
+                let fit = identify_reduced(&log, &timed, Some(window))
+                    .ok()
+                    .filter(|id| id.reduced_chi2.is_finite())
+                    .map(|id| RowFit {
+                        chi2: id.reduced_chi2,
+                        dof: id.dynamic_samples as f64,
+                        inflation: correlation_inflation(&id),
+                    });
+                (d, fit)
+            })
+            .collect();
+        let best = found
+            .iter()
+            .map(|(d, r)| (*d, r.map_or(f64::INFINITY, |r| r.chi2)))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .unwrap_or((0, f64::INFINITY));
+        self.tried.extend(found);
+        best
+    }
+
+    /// The fit last tried at `row`.
+    fn latest(&self, row: i64) -> Option<&RowFit> {
+        self.tried
+            .iter()
+            .rev()
+            .find(|(d, _)| *d == row)
+            .and_then(|(_, f)| f.as_ref())
+    }
+
+    /// The fraction of a row: the least-squares parabola through the rows within
+    /// [`LOCAL_ROWS`] of `best` (tried where not yet), re-centred once where its vertex lies
+    /// beyond half a row of it and within `limit`. The row it is centred on and the
+    /// parabola; None where a parabola does not curve upward.
+    fn vertex(&mut self, mut best: i64, limit: i64) -> Option<(i64, Parabola)> {
+        let mut vertex = None;
+        for _ in 0..2 {
+            let missing: Vec<i64> = (best - LOCAL_ROWS..=best + LOCAL_ROWS)
+                .filter(|d| !self.tried.iter().any(|(t, _)| t == d))
+                .collect();
+            if !missing.is_empty() {
+                self.scan(missing);
+            }
+            let points: Vec<(f64, f64)> = (best - LOCAL_ROWS..=best + LOCAL_ROWS)
+                .filter_map(|d| self.latest(d).map(|f| ((d - best) as f64, f.chi2)))
+                .collect();
+            let fit = local_parabola(&points)?;
+            let shifted = fit.vertex.round() as i64;
+            vertex = Some((best, fit));
+            if shifted == 0 || (best + shifted).abs() >= limit {
+                break;
+            }
+            best += shifted;
+        }
+        vertex
+    }
+
+    /// The delays tried, in order of delay.
+    fn trials(&self) -> Vec<DelayTrial> {
+        let mut trials: Vec<DelayTrial> = self
+            .tried
+            .iter()
+            .map(|(d, f)| DelayTrial {
+                delay_s: *d as f64 * self.dt,
+                reduced_chi2: f.map(|f| f.chi2),
+            })
+            .collect();
+        trials.sort_by(|a, b| a.delay_s.total_cmp(&b.delay_s));
+        trials
+    }
+}
+
 /// The fewest rows either side of zero [`fit_force_delay`] searches.
 pub const SEARCH_ROWS_MIN: i64 = 5;
+
+/// The rows either side of zero a delay is searched over at a window `window_s` and interval
+/// `dt`, and the fewest rows a log must have for its delay to be profiled: on a log a few
+/// windows long, re-pairing shifts a large share of it out at the ends, and the profile
+/// follows that rather than the delay (a 4 s log put a 15 ms delay at 177 +- 36 ms).
+fn profile_extent(window_s: f64, dt: f64) -> (i64, f64) {
+    let limit = ((SEARCH_S / dt).ceil() as i64).max(SEARCH_ROWS_MIN);
+    let min_rows = (MIN_PROFILE_WINDOWS * window_s / dt).max((MIN_PROFILE_SEARCHES * limit) as f64);
+    (limit, min_rows)
+}
 
 /// The force channel's delay behind the position, fitted by identification: the delay
 /// (in rows of `reduced`) that brings identification's reduced chi-square, with the filter
@@ -197,68 +333,30 @@ pub fn fit_force_delay(
     noise: &SensorNoise,
     window_s: Option<f64>,
 ) -> Result<ForceDelayFit, IdentifyError> {
-    use rayon::prelude::*;
     // The delay is the rig's: the first PROFILE_ROWS rows determine it as well as a day does,
     // and each of the profile's identifications is then bounded.
-    let head;
+    let reduced_head;
     let reduced = if reduced.log.len() > PROFILE_ROWS {
-        let log = &reduced.log;
-        head = ReducedLog {
-            log: CalibrationLog {
-                t_s: log.t_s[..PROFILE_ROWS].to_vec(),
-                force_n: log.force_n[..PROFILE_ROWS].to_vec(),
-                position_mm: log.position_mm[..PROFILE_ROWS].to_vec(),
-                ..CalibrationLog::default()
-            },
-            block: reduced.block,
-            log_samples: PROFILE_ROWS * reduced.block,
-        };
-        &head
+        reduced_head = head(reduced);
+        &reduced_head
     } else {
         reduced
     };
     let dt = reduced.log.dt_s();
     let first = identify_reduced(reduced, noise, window_s)?;
     let mut window = window_s.unwrap_or(first.sg_window_s);
-    let limit = ((SEARCH_S / dt).ceil() as i64).max(SEARCH_ROWS_MIN);
-    // On a log a few windows long, re-pairing shifts a large share of it out at the ends, and
-    // the profile follows that rather than the delay (a 4 s log put a 15 ms delay at
-    // 177 +- 36 ms).
-    let min_rows = (MIN_PROFILE_WINDOWS * window / dt).max((MIN_PROFILE_SEARCHES * limit) as f64);
+    let (limit, min_rows) = profile_extent(window, dt);
     if (reduced.log.len() as f64) < min_rows {
         return Err(IdentifyError::ForceDelayLogTooShort {
             log_s: reduced.log.len() as f64 * dt,
             min_s: min_rows * dt,
         });
     }
-    let profile = |rows: f64, window: f64| -> Option<(f64, usize)> {
-        let (log, noise) = retime_reduced(reduced, noise, rows * dt);
-        identify_reduced(&log, &noise, Some(window))
-            .ok()
-            .filter(|id| id.reduced_chi2.is_finite())
-            .map(|id| (id.reduced_chi2, id.dynamic_samples))
-    };
-    let value = |r: Option<(f64, usize)>| r.map_or(f64::INFINITY, |r| r.0);
-    let mut trials: Vec<DelayTrial> = Vec::new();
-    let scan = |rows: Vec<i64>, window: f64, trials: &mut Vec<DelayTrial>| -> (i64, f64) {
-        let found: Vec<(i64, Option<(f64, usize)>)> = rows
-            .into_par_iter()
-            .map(|d| (d, profile(d as f64, window)))
-            .collect();
-        trials.extend(found.iter().map(|(d, r)| DelayTrial {
-            delay_s: *d as f64 * dt,
-            reduced_chi2: r.map(|r| r.0),
-        }));
-        found
-            .iter()
-            .map(|(d, r)| (*d, value(*r)))
-            .min_by(|a, b| a.1.total_cmp(&b.1))
-            .unwrap_or((0, f64::INFINITY))
-    };
     let beyond = || IdentifyError::ForceDelayBeyondSearch {
         limit_s: limit as f64 * dt,
     };
-    let (mut best, least) = scan((-limit..=limit).collect(), window, &mut trials);
+    let mut profile = DelayProfile::new(reduced, noise, window);
+    let (mut best, least) = profile.scan((-limit..=limit).collect());
     if !least.is_finite() {
         // No delay gives a fit: identification's own error says why.
         identify_reduced(reduced, noise, Some(window))?;
@@ -271,10 +369,10 @@ pub fn fit_force_delay(
         let chosen = identify_reduced(&log, &timed, None)?.sg_window_s;
         if (chosen - window).abs() > 0.5 * dt {
             window = chosen;
-            trials.clear();
+            profile = DelayProfile::new(reduced, noise, window);
             let mut around = best;
             loop {
-                let (b, _) = scan((around - 2..=around + 2).collect(), window, &mut trials);
+                let (b, _) = profile.scan((around - 2..=around + 2).collect());
                 if (b - around).abs() < 2 {
                     best = b;
                     break;
@@ -286,67 +384,109 @@ pub fn fit_force_delay(
             }
         }
     }
-    // The fraction: the vertex of the least-squares parabola through the rows within
-    // LOCAL_ROWS of the best (re-centred once where the vertex lies beyond a row of it).
-    let mut vertex = None;
-    for _ in 0..2 {
-        let have: Vec<i64> = trials
-            .iter()
-            .map(|t| (t.delay_s / dt).round() as i64)
-            .collect();
-        let missing: Vec<i64> = (best - LOCAL_ROWS..=best + LOCAL_ROWS)
-            .filter(|d| !have.contains(d))
-            .collect();
-        if !missing.is_empty() {
-            scan(missing, window, &mut trials);
-        }
-        let points: Vec<(f64, f64)> = (best - LOCAL_ROWS..=best + LOCAL_ROWS)
-            .filter_map(|d| {
-                trials
-                    .iter()
-                    .rev()
-                    .find(|t| (t.delay_s / dt).round() as i64 == d)
-                    .and_then(|t| t.reduced_chi2)
-                    .map(|f| ((d - best) as f64, f))
-            })
-            .collect();
-        let fit = local_parabola(&points)
-            .ok_or(IdentifyError::ForceDelayUndetermined { window_s: window })?;
-        let shifted = fit.vertex.round() as i64;
-        vertex = Some((best, fit));
-        if shifted == 0 || (best + shifted).abs() >= limit {
-            break;
-        }
-        best += shifted;
-    }
-    let Some((best, fit)) = vertex else {
-        return Err(IdentifyError::ForceDelayUndetermined { window_s: window });
-    };
+    let undetermined = IdentifyError::ForceDelayUndetermined { window_s: window };
+    let (best, fit) = profile.vertex(best, limit).ok_or(undetermined.clone())?;
     let rows = best as f64 + fit.vertex.clamp(-(LOCAL_ROWS as f64), LOCAL_ROWS as f64);
-    let (log, timed) = retime_reduced(reduced, noise, best as f64 * dt);
-    let (dof, inflation) = identify_reduced(&log, &timed, Some(window))
-        .map(|id| (id.dynamic_samples as f64, correlation_inflation(&id)))
-        .unwrap_or((0.0, 1.0));
-    if dof <= 0.0 {
-        return Err(IdentifyError::ForceDelayUndetermined { window_s: window });
-    }
-    // The total chi-square, dof times the reduced one, rises by the fit's reduced chi-square
-    // (at least 1, scaled by the residuals' correlation) at one standard deviation.
-    let profile = (fit.least.max(1.0) * inflation / (fit.curvature * dof)).sqrt();
-    let std_rows = (profile.powi(2) + fit.vertex_std.powi(2) + ROW_RESOLUTION.powi(2)).sqrt();
+    let std_rows = profile
+        .latest(best)
+        .and_then(|at| vertex_std_rows(&fit, at))
+        .ok_or(undetermined)?;
     if std_rows * dt > UNDETERMINED_STD_S {
         return Err(IdentifyError::ForceDelayUndetermined { window_s: window });
     }
-    let std_rows = Some(std_rows);
-    trials.sort_by(|a, b| a.delay_s.total_cmp(&b.delay_s));
     Ok(ForceDelayFit {
         delay_s: rows * dt,
-        std_s: std_rows.map(|s| s * dt),
+        std_s: Some(std_rows * dt),
         fitted: true,
         window_s: Some(window),
-        trials,
+        trials: profile.trials(),
         parameter_std: Default::default(),
     })
+}
+
+/// What identification's profile says about a force delay where none was asked for
+/// ([`screen_force_delay`]).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ForceDelayScreen {
+    /// The least of the profile's parabola (s; positive when the force looks read late),
+    /// held within [`LOCAL_ROWS`] rows of zero.
+    pub delay_s: f64,
+    /// Its standard deviation (s), as [`fit_force_delay`] gives it.
+    pub std_s: f64,
+    /// The delay over its standard deviation.
+    pub z: f64,
+    /// Whether the parabola's least lies beyond the rows screened (the delay is then at
+    /// least that).
+    pub beyond: bool,
+    /// The filter window (s) held.
+    pub window_s: f64,
+    /// Whether the delay is beyond [`SCREEN_Z`] standard deviations and half a row: the log
+    /// looks read with its force late (or early), and `--force-delay auto` should be given.
+    pub suspected: bool,
+}
+
+/// How many standard deviations from zero a screened delay must lie to be suspected. On 60
+/// lag-free logs of the independent rig's sweep (every profile, 100 Hz to 1 kHz, light to
+/// heavy transmissions) the largest was 2.0; a 10 ms delay at 100 Hz on its default
+/// transmission, which puts m at z -7, is 3.4.
+pub const SCREEN_Z: f64 = 3.0;
+
+/// Screens a log identified as logged (`id`, on `reduced`) for a force read at another
+/// instant than the position. A delay is absorbed by the fit (a force read late is the force
+/// less the delay times its rate, which looks like damping and inertia), so the fit alone
+/// does not show it. Identification's reduced chi-square is taken at the whole-row delays
+/// within [`LOCAL_ROWS`] of zero, `id`'s window held; the least is then found as
+/// [`fit_force_delay`] finds it around its best row (a parabola, re-centred once), with its
+/// standard deviation. Seven identifications where the log shows no delay, at most 21. None
+/// where the log is too short for [`fit_force_delay`], or the profile does not curve upward.
+pub fn screen_force_delay(
+    reduced: &ReducedLog,
+    noise: &SensorNoise,
+    id: &Identification,
+) -> Option<ForceDelayScreen> {
+    let reduced_head;
+    let reduced = if reduced.log.len() > PROFILE_ROWS {
+        reduced_head = head(reduced);
+        &reduced_head
+    } else {
+        reduced
+    };
+    let dt = reduced.log.dt_s();
+    let window = id.sg_window_s;
+    let (limit, min_rows) = profile_extent(window, dt);
+    if !dt.is_finite() || dt <= 0.0 || (reduced.log.len() as f64) < min_rows {
+        return None;
+    }
+    let mut profile = DelayProfile::new(reduced, noise, window);
+    let (best, _) = profile.scan((-LOCAL_ROWS..=LOCAL_ROWS).collect());
+    let (best, fit) = profile.vertex(best, limit)?;
+    let std_rows = vertex_std_rows(&fit, profile.latest(best)?)?;
+    let beyond = fit.vertex.abs() > LOCAL_ROWS as f64;
+    let rows = best as f64 + fit.vertex.clamp(-(LOCAL_ROWS as f64), LOCAL_ROWS as f64);
+    let z = rows / std_rows;
+    Some(ForceDelayScreen {
+        delay_s: rows * dt,
+        std_s: std_rows * dt,
+        z,
+        beyond,
+        window_s: window,
+        suspected: z.abs() > SCREEN_Z && rows.abs() >= 0.5,
+    })
+}
+
+/// The first [`PROFILE_ROWS`] rows of `reduced`.
+fn head(reduced: &ReducedLog) -> ReducedLog {
+    let log = &reduced.log;
+    ReducedLog {
+        log: CalibrationLog {
+            t_s: log.t_s[..PROFILE_ROWS].to_vec(),
+            force_n: log.force_n[..PROFILE_ROWS].to_vec(),
+            position_mm: log.position_mm[..PROFILE_ROWS].to_vec(),
+            ..CalibrationLog::default()
+        },
+        block: reduced.block,
+        log_samples: PROFILE_ROWS * reduced.block,
+    }
 }
 
 /// Carries a fitted delay's standard deviation into `id`, identified on `reduced` re-timed by

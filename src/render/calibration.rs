@@ -12,7 +12,7 @@ use crate::estimate::identify::{
 };
 use crate::estimate::noise::{NoiseModel, NoiseOrigin, ResolvedNoise};
 use crate::estimate::pipeline::EstimateRun;
-use crate::estimate::retime::ForceDelayFit;
+use crate::estimate::retime::{ForceDelayFit, ForceDelayScreen};
 use crate::verdict::validate::{spring_force_n, CurveValidation, Validation};
 
 /// `camspring noise --json`.
@@ -149,6 +149,7 @@ pub fn identification_json(
     noise: &ResolvedNoise,
     sample_rate_hz: f64,
     force_delay: Option<&ForceDelayFit>,
+    force_delay_screen: Option<&ForceDelayScreen>,
 ) -> Value {
     let mut params = Map::new();
     for (p, e) in id.parameters.iter() {
@@ -193,6 +194,7 @@ pub fn identification_json(
         },
         "noise": sensor_noise_json(noise),
         "force_delay": force_delay,
+        "force_delay_screen": force_delay_screen,
     })
 }
 
@@ -282,11 +284,40 @@ pub fn force_delay_line(d: &ForceDelayFit) -> String {
     }
 }
 
+/// The line on what the screen for a force read late found, where no delay was asked for:
+/// a warning where one is suspected.
+pub fn force_delay_screen_line(screen: &ForceDelayScreen) -> String {
+    let late = if screen.delay_s >= 0.0 {
+        "after"
+    } else {
+        "before"
+    };
+    let at_least = if screen.beyond { "at least " } else { "" };
+    if !screen.suspected {
+        return format!(
+            "  force and position read together as far as the fit tells (screened: {:+.1} +- \
+             {:.1} ms)\n",
+            screen.delay_s * 1e3,
+            screen.std_s * 1e3
+        );
+    }
+    format!(
+        "  WARNING: the force looks read {at_least}{:.1} +- {:.1} ms {late} the position \
+         ({:.1} standard deviations from none, by the fit's chi-square at the whole-sample \
+         delays near zero): a fit read as logged takes such a delay as inertia and damping. \
+         Give --force-delay auto to fit it and re-time the force.\n",
+        screen.delay_s.abs() * 1e3,
+        screen.std_s * 1e3,
+        screen.z.abs()
+    )
+}
+
 /// The text summary of `camspring identify`.
 pub fn format_identification(
     id: &Identification,
     noise: &ResolvedNoise,
     force_delay: Option<&ForceDelayFit>,
+    force_delay_screen: Option<&ForceDelayScreen>,
 ) -> String {
     let units = [
         ("m", "N s^2/mm"),
@@ -325,6 +356,9 @@ pub fn format_identification(
     }
     if let Some(d) = force_delay {
         s.push_str(&force_delay_line(d));
+    }
+    if let Some(screen) = force_delay_screen {
+        s.push_str(&force_delay_screen_line(screen));
     }
     if let Some(problem) = id.adequacy.problem() {
         let _ = writeln!(
@@ -505,6 +539,7 @@ pub fn estimate_json(est: &EstimateRun) -> Value {
         "samples": run.samples,
         "position_offset_mm": est.position_offset_mm,
         "force_delay": est.force_delay,
+        "force_delay_screen": est.force_delay_screen,
         "noise": sensor_noise_json(&est.noise),
         "first_sample": run.first_sample,
         "outliers": run.outliers,
@@ -656,6 +691,9 @@ pub fn format_estimate(est: &EstimateRun) -> String {
     );
     if let Some(d) = &est.force_delay {
         s.push_str(&force_delay_line(d));
+    }
+    if let Some(screen) = &est.force_delay_screen {
+        s.push_str(&force_delay_screen_line(screen));
     }
     for (name, k, unit) in [
         ("k2", idx::K2, "1/mm"),

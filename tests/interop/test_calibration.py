@@ -1024,8 +1024,15 @@ def test_a_force_read_late_is_fitted_and_re_timed(tmp_path, seed):
     def z(p, key, value):
         return (p[key] - value) / p[f"{key}_std"]
 
-    plain = json.loads(camspring("identify", log, "--json").stdout)["parameters"]
+    as_logged = json.loads(camspring("identify", log, "--json").stdout)
+    plain = as_logged["parameters"]
     assert max(abs(plain[k] / v - 1.0) for k, v in truth[:2]) > 0.1, plain
+    # Read as logged, the screen suspects the delay (within three of its standard deviations
+    # of 15 ms) and the text says to fit it.
+    screen = as_logged["force_delay_screen"]
+    assert screen["suspected"] and abs(screen["delay_s"] - 0.015) < 3.0 * screen["std_s"], screen
+    text = camspring("identify", log).stdout
+    assert "WARNING: the force looks read" in text and "--force-delay auto" in text, text
     auto = camspring("identify", log, "--json", "--force-delay", "auto")
     assert auto.returncode == 0, auto.stderr
     j = json.loads(auto.stdout)
@@ -1040,6 +1047,18 @@ def test_a_force_read_late_is_fitted_and_re_timed(tmp_path, seed):
     assert given["force_delay"] == {"delay_s": 0.015, "std_s": None, "fitted": False, "window_s": None, "trials": [], "parameter_std": {}}
     for key, value in truth:
         assert abs(z(given["parameters"], key, value)) < 3.0, (key, given["parameters"])
+
+
+@pytest.mark.parametrize("seed", [3, 4])
+def test_a_log_read_together_is_not_suspected_of_a_force_delay(tmp_path, seed):
+    """The same log read with force and position together: the screen that runs on every
+    identification (`force_delay_screen`) puts the delay within three of its standard
+    deviations of zero, suspects none, and the text says so without a warning."""
+    log = late_log(tmp_path, Transmission(m=0.05, d0=0.0, d1=0.2, d2=-1e-4), seed, 0)
+    screen = json.loads(camspring("identify", log, "--json").stdout)["force_delay_screen"]
+    assert not screen["suspected"] and abs(screen["delay_s"]) < 3.0 * screen["std_s"], screen
+    text = camspring("identify", log).stdout
+    assert "read together as far as the fit tells" in text and "WARNING: the force" not in text, text
 
 
 def test_a_force_delay_beyond_a_second_is_refused(tmp_path):
@@ -1058,7 +1077,8 @@ def test_estimate_validate_and_diagnose_re_time_a_force_read_late(tmp_path):
     Read as logged, the filter's M is 6.7 % low and the diagnosis leaves 0.71 % of the force
     unexplained; with `--force-delay auto` each fits the delay and re-times the force: M within
     2 % (the filter's target), validate passes the true law and reports the delay, and the
-    diagnosis leaves less than half the force it did unexplained."""
+    diagnosis leaves less than half the force it did unexplained. The run read as logged
+    warns that the force looks read late."""
     tr = Transmission(m=0.05, d0=0.0, d1=0.2, d2=-1e-4)
     log = late_log(tmp_path, tr, 4, 15)
     law = spec(tmp_path / "true.toml", tr, 1.0)
@@ -1070,6 +1090,9 @@ def test_estimate_validate_and_diagnose_re_time_a_force_read_late(tmp_path):
 
     plain, auto = estimate(), estimate("--force-delay", "auto")
     assert abs(plain["final"]["m_n_s2_per_mm"] / tr.m - 1.0) > 0.05, plain["final"]
+    # Read as logged, the filter's run says the force looks read late.
+    assert plain["force_delay_screen"]["suspected"], plain["force_delay_screen"]
+    assert auto["force_delay_screen"] is None, auto["force_delay_screen"]
     assert abs(auto["final"]["m_n_s2_per_mm"] / tr.m - 1.0) < 0.02, auto["final"]
     d = auto["force_delay"]
     assert d["fitted"] and abs(d["delay_s"] - 0.015) < 3.0 * d["std_s"], d

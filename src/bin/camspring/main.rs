@@ -538,12 +538,18 @@ fn main() -> ExitCode {
                     EXIT_OK
                 };
                 Ok(Report::of_checks(
-                    format_identification(id, &run.noise, run.force_delay.as_ref()),
+                    format_identification(
+                        id,
+                        &run.noise,
+                        run.force_delay.as_ref(),
+                        run.force_delay_screen.as_ref(),
+                    ),
                     to_json(&identification_json(
                         id,
                         &run.noise,
                         run.sample_rate_hz,
                         run.force_delay.as_ref(),
+                        run.force_delay_screen.as_ref(),
                     ))?,
                     code,
                 ))
