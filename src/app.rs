@@ -1037,6 +1037,11 @@ pub fn run_validate(
             }
             v.position_offset_mm = offset_mm;
             v.force_delay = force_delay.clone();
+            // The filter's identification screened the log for a delay; a log re-timed by one
+            // asked for is not reported on.
+            if force_delay.is_none() {
+                v.force_delay_screen = est.as_ref().and_then(|e| e.force_delay_screen.clone());
+            }
             if judge_strokes(&mut v.criteria, &mut v.band_exits) {
                 v.pass = v.criteria.iter().all(|c| c.pass);
             }

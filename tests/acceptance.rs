@@ -46,6 +46,13 @@ fn the_acceptance_matrix() {
         beyond_3 <= 2,
         "{beyond_3} of 72 cases have an estimate beyond 3 sigma"
     );
+    // The simulator reads force and position together: the screen for a force read late
+    // runs on every log and suspects none (its |z| was at most 1.3 over the 72, Coulomb
+    // friction of 4 N included).
+    for o in &out {
+        let (z, suspected) = o.delay_screen.expect("a 300 s log is screened");
+        assert!(!suspected && z.abs() < 3.0, "{o}");
+    }
     // validate passes the true law and fails a law with k2 5 % high, judging through the
     // filter where it is consistent and through identification where it is not.
     // (The filter's stiffness path is checked against identification's law: on a slow run

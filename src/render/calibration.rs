@@ -779,6 +779,9 @@ pub fn format_validation(v: &Validation) -> String {
     if let Some(d) = &v.force_delay {
         s.push_str(&force_delay_line(d));
     }
+    if let Some(screen) = &v.force_delay_screen {
+        s.push_str(&force_delay_screen_line(screen));
+    }
     s
 }
 

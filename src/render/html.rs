@@ -440,9 +440,7 @@ pub fn validation_html(
          <h1>Validation of {log} {}</h1>\n\
          <p>Designed law: F(x) = {:.7} N &middot; exp({:.7} /mm &middot; x) + {:.7} N. \
          Identified from the log: F(x) = {:.7} N &middot; exp({:.7} /mm &middot; x) + {:.7} N. \
-         {} k2 = {:.7} &plusmn; {:.7} /mm. Deflections in the log: {:.3} to {:.3} mm.</p>\n\
-         <h2>Criteria</h2>\n<table><tr><th>status</th><th>criterion</th><th>deviation</th>\
-         <th>upper bound</th><th>tolerance</th><th>what</th></tr>\n",
+         {} k2 = {:.7} &plusmn; {:.7} /mm. Deflections in the log: {:.3} to {:.3} mm.</p>\n",
         badge(verdict),
         v.designed.mu_n,
         v.designed.k2_per_mm,
@@ -460,6 +458,27 @@ pub fn validation_html(
         v.range_min_mm,
         v.range_max_mm,
         log = escape(log_name),
+    );
+    if let Some(screen) = v.force_delay_screen.as_ref().filter(|s| s.suspected) {
+        let late = if screen.delay_s >= 0.0 {
+            "after"
+        } else {
+            "before"
+        };
+        let _ = writeln!(
+            h,
+            "<p><span class=\"warn\">Warning</span> The force looks read {:.1} &plusmn; {:.1} ms \
+             {late} the position ({:.1} standard deviations from none): a fit read as logged \
+             takes such a delay as inertia and damping. Run again with \
+             <code>--force-delay auto</code> to fit it and re-time the force.</p>",
+            screen.delay_s.abs() * 1e3,
+            screen.std_s * 1e3,
+            screen.z.abs()
+        );
+    }
+    h.push_str(
+        "<h2>Criteria</h2>\n<table><tr><th>status</th><th>criterion</th><th>deviation</th>\
+         <th>upper bound</th><th>tolerance</th><th>what</th></tr>\n",
     );
     criteria_rows(&mut h, &v.criteria);
     if let Some(svg) = validation_svg {

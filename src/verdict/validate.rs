@@ -263,6 +263,8 @@ pub struct Validation {
     pub position_offset_mm: Option<f64>,
     /// The force channel's delay the force was re-timed by before judging it, if any.
     pub force_delay: Option<crate::estimate::retime::ForceDelayFit>,
+    /// Where no delay was asked for, what the filter's identification says of one.
+    pub force_delay_screen: Option<crate::estimate::retime::ForceDelayScreen>,
     /// What part of the designed stroke the log covers (set with [`coverage`]).
     pub coverage: Option<Coverage>,
     /// The build's diagnosis, whose stroke-by-stroke curves judge the force
@@ -435,6 +437,7 @@ pub fn validate_with(
         band_exits,
         position_offset_mm: None,
         force_delay: None,
+        force_delay_screen: None,
         coverage: None,
         diagnosis: None,
     }

@@ -109,6 +109,9 @@ pub struct Outcome {
     /// validate of the true law passes, and of a law with k2 5 % high fails.
     pub validate_true: bool,
     pub validate_off: bool,
+    /// The force-delay screen's z (None: not screened), and whether it suspected a delay
+    /// (the simulator reads force and position together).
+    pub delay_screen: Option<(f64, bool)>,
     pub error: Option<String>,
 }
 
@@ -166,9 +169,13 @@ impl fmt::Display for Outcome {
         }
         write!(
             f,
-            "w {:.2}s chi2 {:.2} k2 {:+.3}% mu {:+.2}% worst |z| {:.1} ({}) drop {:?}{}{} ",
+            "w {:.2}s chi2 {:.2} delay z {} k2 {:+.3}% mu {:+.2}% worst |z| {:.1} ({}) drop {:?}{}{} ",
             self.window_s,
             self.reduced_chi2,
+            match self.delay_screen {
+                Some((z, suspected)) => format!("{z:+.1}{}", if suspected { " SUSPECTED" } else { "" }),
+                None => "-".into(),
+            },
             100.0 * self.k2_error,
             100.0 * self.mu_error,
             self.worst_z.0,
@@ -240,6 +247,7 @@ pub fn run_case(case: &Case) -> Outcome {
         ekf_imprecise: false,
         validate_true: false,
         validate_off: false,
+        delay_screen: None,
         error: None,
     };
     let mut log = None;
@@ -294,6 +302,7 @@ pub fn run_case(case: &Case) -> Outcome {
         }
     };
     let id = run.identification.as_ref().expect("identified");
+    outcome.delay_screen = run.force_delay_screen.as_ref().map(|s| (s.z, s.suspected));
     outcome.ekf_recovered = run.recovery.is_some();
     outcome.ekf_imprecise = !run.imprecise().is_empty();
     if !run.consistency.consistent {

@@ -1077,8 +1077,8 @@ def test_estimate_validate_and_diagnose_re_time_a_force_read_late(tmp_path):
     Read as logged, the filter's M is 6.7 % low and the diagnosis leaves 0.71 % of the force
     unexplained; with `--force-delay auto` each fits the delay and re-times the force: M within
     2 % (the filter's target), validate passes the true law and reports the delay, and the
-    diagnosis leaves less than half the force it did unexplained. The run read as logged
-    warns that the force looks read late."""
+    diagnosis leaves less than half the force it did unexplained. Read as logged, estimate and
+    validate warn that the force looks read late."""
     tr = Transmission(m=0.05, d0=0.0, d1=0.2, d2=-1e-4)
     log = late_log(tmp_path, tr, 4, 15)
     law = spec(tmp_path / "true.toml", tr, 1.0)
@@ -1098,10 +1098,18 @@ def test_estimate_validate_and_diagnose_re_time_a_force_read_late(tmp_path):
     assert d["fitted"] and abs(d["delay_s"] - 0.015) < 3.0 * d["std_s"], d
     assert abs(auto["final"]["k2_per_mm"] - tr.k2) < 3.0 * auto["final"]["k2_per_mm_std"], auto["final"]
 
+    # Read as logged, validate's verdict carries the screen's warning, in the JSON and at the
+    # top of validation.html; with auto it fits the delay instead and screens nothing.
+    v = camspring("validate", law, log, "--json", "--svg", tmp_path / "plain.svg")
+    assert v.returncode == 0, v.stderr + v.stdout[-2000:]
+    assert json.loads(v.stdout)["force_delay_screen"]["suspected"], v.stdout[-2000:]
+    html = (tmp_path / "validation.html").read_text()
+    assert html.index("The force looks read") < html.index("<h2>Criteria</h2>"), html[:3000]
     v = camspring("validate", law, log, "--json", "--force-delay", "auto", "--svg", tmp_path / "v.svg")
     assert v.returncode == 0, v.stderr + v.stdout[-2000:]
     vj = json.loads(v.stdout)
     assert vj["pass"] and abs(vj["force_delay"]["delay_s"] - 0.015) < 3.0 * vj["force_delay"]["std_s"], vj["force_delay"]
+    assert vj["force_delay_screen"] is None, vj["force_delay_screen"]
 
     def diagnose(*extra):
         r = camspring("diagnose", law, log, "--json", *extra)
