@@ -1061,6 +1061,28 @@ def test_a_log_read_together_is_not_suspected_of_a_force_delay(tmp_path, seed):
     assert "read together as far as the fit tells" in text and "WARNING: the force" not in text, text
 
 
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_light_transmission_read_late_is_warned_and_re_timed(tmp_path, seed):
+    """The acceptance matrix's light transmission (m 0.002, d1 0.05) read 40 ms late: the
+    delay's misfit, the stiffness times the velocity times 40 ms, is larger than the damper's
+    force, so read as logged d1 comes out below half its value (negative on these seeds) and
+    m is lost, under a reduced chi-square that still says "fits". The screen warns, with the
+    delay within three of its standard deviations of 40 ms; `--force-delay auto` fits it and
+    brings d1 and k2 within three of theirs."""
+    tr = Transmission(m=0.002, d0=0.0, d1=0.05, d2=0.0)
+    log = late_log(tmp_path, tr, seed, 40)
+    plain = json.loads(camspring("identify", log, "--json").stdout)
+    assert plain["parameters"]["d1_n_s_per_mm"] < 0.5 * tr.d1, plain["parameters"]
+    screen = plain["force_delay_screen"]
+    assert screen["suspected"] and abs(screen["delay_s"] - 0.040) < 3.0 * screen["std_s"], screen
+    auto = json.loads(camspring("identify", log, "--json", "--force-delay", "auto").stdout)
+    d = auto["force_delay"]
+    assert abs(d["delay_s"] - 0.040) < 3.0 * d["std_s"], d
+    p = auto["parameters"]
+    for key, value in [("d1_n_s_per_mm", tr.d1), ("k2_per_mm", tr.k2)]:
+        assert abs(p[key] - value) < 3.0 * p[f"{key}_std"], (key, p)
+
+
 def test_a_force_delay_beyond_a_second_is_refused(tmp_path):
     """A delay is a channel scan or a converter's filter, milliseconds: one beyond a second is
     refused naming the option and the limit, not a second of rows held."""
