@@ -1617,7 +1617,8 @@ impl std::fmt::Display for SignFault {
                  the model does not describe this log's motion (likely causes: friction that \
                  holds the rod where the log never shows it sliding, or force and position \
                  sampled at different times); record a run that moves over the stroke, or \
-                 check the channels' timing"
+                 check the channels' timing (--force-delay auto fits a load cell read after \
+                 the encoder and re-times it)"
             ),
         }
     }

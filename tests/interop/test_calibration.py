@@ -1083,6 +1083,39 @@ def test_a_light_transmission_read_late_is_warned_and_re_timed(tmp_path, seed):
         assert abs(p[key] - value) < 3.0 * p[f"{key}_std"], (key, p)
 
 
+@pytest.mark.parametrize("seed", [0, 2])
+def test_a_negative_damping_with_a_rising_spring_blames_neither_sensor(tmp_path, seed):
+    """The light transmission (m 0.002, d1 0.05) read 80 ms late: the delay's misfit, the
+    stiffness times the velocity times 80 ms, outweighs the damper, and the fit's d1 is
+    negative beyond five of its standard deviations while the spring still rises. That is no
+    reversed sensor: identify marks it a sign fault blaming neither (exit 1), names the
+    channels' timing and `--force-delay auto`, and estimate stops (exit 2) with the same
+    message. With `auto` the delay comes out within three of its standard deviations of 80 ms
+    and d1 within three of its own."""
+    tr = Transmission(m=0.002, d0=0.0, d1=0.05, d2=0.0)
+    log = late_log(tmp_path, tr, seed, 80)
+    r = camspring("identify", log, "--json")
+    assert r.returncode == 1, r.stderr
+    j = json.loads(r.stdout)
+    assert j["fit"]["status"] == "does-not-fit", j["fit"]
+    assert j["sign_fault"]["likely"] == "neither", j["sign_fault"]
+    assert "a negative damping d1" in j["sign_fault"]["found"], j["sign_fault"]
+    assert j["parameters"]["d1_n_s_per_mm"] < -5.0 * j["parameters"]["d1_n_s_per_mm_std"], j["parameters"]
+    text = camspring("identify", log).stdout
+    assert "neither sensor reads reversed" in text and "--force-delay auto" in text, text
+    e = camspring("estimate", log, "-o", tmp_path / "est.csv")
+    assert e.returncode == 2 and "neither sensor reads reversed" in e.stderr, e.stderr
+    assert "--force-delay auto" in e.stderr, e.stderr
+    r = camspring("identify", log, "--json", "--force-delay", "auto")
+    assert r.returncode == 0, r.stderr
+    auto = json.loads(r.stdout)
+    assert auto["sign_fault"] is None and auto["fit"]["status"] == "fits", auto["fit"]
+    d = auto["force_delay"]
+    assert abs(d["delay_s"] - 0.080) < 3.0 * d["std_s"], d
+    p = auto["parameters"]
+    assert abs(p["d1_n_s_per_mm"] - tr.d1) < 3.0 * p["d1_n_s_per_mm_std"], p
+
+
 def test_a_force_delay_beyond_a_second_is_refused(tmp_path):
     """A delay is a channel scan or a converter's filter, milliseconds: one beyond a second is
     refused naming the option and the limit, not a second of rows held."""
