@@ -517,19 +517,10 @@ fn retime_in_memory(
     force_delay: ForceDelay,
     window_s: Option<f64>,
 ) -> Result<Option<crate::estimate::retime::ForceDelayFit>> {
-    use crate::estimate::identify::{Reduction, MAX_IDENTIFY_SAMPLES};
+    use crate::estimate::identify::Reduction;
     use crate::estimate::retime::{fit_force_delay, retime_log, RowDelay};
-    let Some(delay) = force_delay.resolve(|| {
-        let mut reduction = Reduction::new(MAX_IDENTIFY_SAMPLES);
-        for i in 0..log.len() {
-            reduction.push(crate::estimate::log::Sample {
-                t_s: log.t_s[i],
-                force_n: log.force_n[i],
-                position_mm: log.position_mm[i],
-            });
-        }
-        fit_force_delay(&reduction.finish(), noise, window_s)
-    })?
+    let Some(delay) =
+        force_delay.resolve(|| fit_force_delay(&Reduction::of_log(log), noise, window_s))?
     else {
         return Ok(None);
     };

@@ -986,24 +986,13 @@ fn read_late(log: &CalibrationLog, rows: usize) -> CalibrationLog {
 
 #[test]
 fn a_force_read_late_is_suspected_and_one_read_together_is_not() {
-    use camspring::estimate::identify::{identify_reduced, Reduction, MAX_IDENTIFY_SAMPLES};
+    use camspring::estimate::identify::{identify_reduced, Reduction};
     use camspring::estimate::retime::screen_force_delay;
-    let reduce = |log: &CalibrationLog| {
-        let mut r = Reduction::new(MAX_IDENTIFY_SAMPLES);
-        for i in 0..log.len() {
-            r.push(camspring::estimate::log::Sample {
-                t_s: log.t_s[i],
-                force_n: log.force_n[i],
-                position_mm: log.position_mm[i],
-            });
-        }
-        r.finish()
-    };
     let noise = SensorNoise::default();
     for seed in 0..2 {
         let (log, _) = run(Profile::Sines, 300.0, seed, 0.0);
         for rows in [0, 2] {
-            let reduced = reduce(&read_late(&log, rows));
+            let reduced = Reduction::of_log(&read_late(&log, rows));
             let id = identify_reduced(&reduced, &noise, None).unwrap();
             let screen =
                 screen_force_delay(&reduced, &noise, &id).expect("a 300 s log is screened");

@@ -1434,6 +1434,20 @@ impl Reduction {
         Reduction::with_block(0, max_blocks)
     }
 
+    /// A log held in memory reduced as it would be read ([`Reduction::new`], at most
+    /// [`MAX_IDENTIFY_SAMPLES`] blocks).
+    pub fn of_log(log: &CalibrationLog) -> ReducedLog {
+        let mut reduction = Reduction::new(MAX_IDENTIFY_SAMPLES);
+        for i in 0..log.len() {
+            reduction.push(super::log::Sample {
+                t_s: log.t_s[i],
+                force_n: log.force_n[i],
+                position_mm: log.position_mm[i],
+            });
+        }
+        reduction.finish()
+    }
+
     /// A reduction over blocks of `block` samples (0: set by the first interval).
     pub fn with_block(block: usize, max_blocks: usize) -> Reduction {
         Reduction {
