@@ -897,9 +897,15 @@ pub fn run_validate(
     if let Some(c) = offset_mm {
         log.shift_position(c);
     }
+    // The filter's identification screens the log for a delay only where none was asked for:
+    // a log re-timed above is not screened again.
     let opts = &EstimateOptions {
         position_offset: PositionOffset::None,
-        force_delay: ForceDelay::None,
+        force_delay: if force_delay.is_some() {
+            ForceDelay::Applied
+        } else {
+            ForceDelay::None
+        },
         noise: noise.into(),
         ..opts.clone()
     };
@@ -1028,11 +1034,9 @@ pub fn run_validate(
             }
             v.position_offset_mm = offset_mm;
             v.force_delay = force_delay.clone();
-            // The filter's identification screened the log for a delay; a log re-timed by one
-            // asked for is not reported on.
-            if force_delay.is_none() {
-                v.force_delay_screen = est.as_ref().and_then(|e| e.force_delay_screen.clone());
-            }
+            // The filter's identification screened the log for a delay where none was asked
+            // for.
+            v.force_delay_screen = est.as_ref().and_then(|e| e.force_delay_screen.clone());
             if judge_strokes(&mut v.criteria, &mut v.band_exits) {
                 v.pass = v.criteria.iter().all(|c| c.pass);
             }

@@ -1011,3 +1011,31 @@ fn a_force_read_late_is_suspected_and_one_read_together_is_not() {
         }
     }
 }
+
+#[test]
+fn a_log_its_caller_re_timed_is_not_screened_again() {
+    // `validate` re-times a log in memory before its filter runs; the filter's identification
+    // then screens it only where no delay was asked for. The same late log through the
+    // pipeline: as logged it is screened and suspected, marked applied it is neither re-timed
+    // nor screened (the screen's seven and more identifications are not run).
+    use camspring::estimate::pipeline::{estimate, EstimateOptions};
+    use camspring::estimate::retime::ForceDelay;
+    let (log, _) = run(Profile::Sines, 120.0, 0, 0.0);
+    let late = read_late(&log, 2);
+    let screened = |force_delay| {
+        let opts = EstimateOptions {
+            force_delay,
+            twins: 0,
+            ..EstimateOptions::new(SensorNoise::default())
+        };
+        estimate(&late, &opts, |_, _| {}).expect("the filter runs on a 120 s log")
+    };
+    let as_logged = screened(ForceDelay::None);
+    let screen = as_logged
+        .force_delay_screen
+        .expect("a 120 s log read as logged is screened");
+    assert!(screen.suspected, "{screen:?}");
+    let applied = screened(ForceDelay::Applied);
+    assert!(applied.force_delay_screen.is_none());
+    assert!(applied.force_delay.is_none());
+}

@@ -1113,8 +1113,8 @@ where
         }
     };
     // Where no delay was asked for, whether the log looks read with its force late.
-    let force_delay_screen = match (&force_delay, &identification) {
-        (None, Some(id)) => screen_force_delay(reduced, noise, id),
+    let force_delay_screen = match &identification {
+        Some(id) if opts.force_delay.screened() => screen_force_delay(reduced, noise, id),
         _ => None,
     };
     let dt = survey.dt_s;

@@ -29,20 +29,29 @@ pub enum ForceDelay {
     Seconds(f64),
     /// Fitted by identification ([`fit_force_delay`]).
     Auto,
+    /// Already taken out of the log by the caller (re-timed in memory): nothing is applied
+    /// again, fitted or screened for ([`screen_force_delay`]).
+    Applied,
 }
 
 impl ForceDelay {
     /// The delay to apply: none, as given, or what `fit` finds ([`fit_force_delay`], called
-    /// only for [`ForceDelay::Auto`]).
+    /// only for [`ForceDelay::Auto`]); none for one already applied.
     pub fn resolve(
         self,
         fit: impl FnOnce() -> Result<ForceDelayFit, IdentifyError>,
     ) -> Result<Option<ForceDelayFit>, IdentifyError> {
         Ok(match self {
-            ForceDelay::None => None,
+            ForceDelay::None | ForceDelay::Applied => None,
             ForceDelay::Seconds(s) => Some(ForceDelayFit::given(s)),
             ForceDelay::Auto => Some(fit()?),
         })
+    }
+
+    /// Whether a log read with this setting is screened for a delay ([`screen_force_delay`]):
+    /// only where none was asked for.
+    pub fn screened(self) -> bool {
+        self == ForceDelay::None
     }
 }
 
