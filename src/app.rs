@@ -1067,7 +1067,7 @@ pub fn run_validate(
             (Verdict::Law(v), svg_text, html)
         }
         ForceLaw::Table(_) | ForceLaw::Polynomial(_) => {
-            refuse_reversed_sensor(&log, &noise, opts.window_s)?;
+            identify_for_verdict(&log, &noise, opts.window_s)?;
             let mut v = validate_curve(&designed, &log, &noise, tolerance, band.as_ref());
             v.position_offset_mm = offset_mm;
             v.force_delay = force_delay.clone();
@@ -1488,22 +1488,29 @@ pub struct DiagnoseOptions {
     pub zero: PositionOffset,
 }
 
-/// Refuses a log whose identification has signs no transmission has (a load cell or an
-/// encoder read reversed), naming the sensor and the option, before a verdict is drawn from
-/// it. A log identification cannot fit is left to the verdict, as before.
-fn refuse_reversed_sensor(
+/// Identifies a log a verdict is drawn from, as logged, on its block means
+/// ([`crate::estimate::identify::Reduction::of_log`]), and refuses one whose identification
+/// has signs no transmission has (a load cell or an encoder read reversed), naming the sensor
+/// and the option, before a verdict is drawn from it. The block means are returned with the
+/// identification, which is None where identification cannot fit the log (left to the
+/// verdict, as before).
+fn identify_for_verdict(
     log: &crate::estimate::log::CalibrationLog,
     noise: &crate::estimate::identify::SensorNoise,
     window_s: Option<f64>,
-) -> Result<()> {
-    match crate::estimate::identify::identify_with_window(log, noise, window_s) {
+) -> Result<(
+    crate::estimate::identify::ReducedLog,
+    Option<crate::estimate::identify::Identification>,
+)> {
+    let reduced = crate::estimate::identify::Reduction::of_log(log);
+    match crate::estimate::identify::identify_reduced(&reduced, noise, window_s) {
         Ok(id) => match id.sign_fault {
             Some(fault) => Err(Error::Estimate(
                 crate::estimate::pipeline::EstimateError::SignFault(fault),
             )),
-            None => Ok(()),
+            None => Ok((reduced, Some(id))),
         },
-        Err(_) => Ok(()),
+        Err(_) => Ok((reduced, None)),
     }
 }
 
@@ -1520,12 +1527,46 @@ fn diagnose_log(
         .resolve(crate::estimate::noise::log_noise(&log).as_ref());
     warn_noise(log_path, &resolved);
     let mut noise = resolved.noise;
+    let raw = (opts.force_delay == ForceDelay::Auto).then(|| (log.clone(), noise));
     let force_delay = retime_in_memory(&mut log, &mut noise, opts.force_delay, opts.window_s)?;
-    refuse_reversed_sensor(&log, &noise, opts.window_s)?;
-    let mut diagnosis =
-        crate::verdict::diagnose::diagnose(&design, &log, &noise, opts.window_s, opts.zero)
-            .map_err(|e| Error::Argument(format!("diagnose {}: {e}", log_path.display())))?;
+    let (reduced, identification) = identify_for_verdict(&log, &noise, opts.window_s)?;
+    let diagnose = |log: &crate::estimate::log::CalibrationLog,
+                    noise: &crate::estimate::identify::SensorNoise| {
+        crate::verdict::diagnose::diagnose(&design, log, noise, opts.window_s, opts.zero)
+            .map_err(|e| Error::Argument(format!("diagnose {}: {e}", log_path.display())))
+    };
+    let mut diagnosis = diagnose(&log, &noise)?;
     diagnosis.force_delay = force_delay;
+    // A fitted delay's standard deviation is carried into the build parameters: the log is
+    // diagnosed again re-timed by the delay plus and minus it (where both diagnose).
+    if let (Some((raw, raw_noise)), Some(d)) = (&raw, &diagnosis.force_delay) {
+        if let Some(std) = d.std_s.filter(|s| *s > 0.0) {
+            let at = |delay_s: f64| {
+                let mut log = raw.clone();
+                let mut noise = *raw_noise;
+                retime_in_memory(
+                    &mut log,
+                    &mut noise,
+                    ForceDelay::Seconds(delay_s),
+                    opts.window_s,
+                )
+                .ok()?;
+                diagnose(&log, &noise).ok()
+            };
+            if let (Some(plus), Some(minus)) = (at(d.delay_s + std), at(d.delay_s - std)) {
+                diagnosis.carry_delay_uncertainty(&plus, &minus);
+            }
+        }
+    }
+    // Where no delay was asked for, whether the log looks read with its force late, by
+    // identification's profile, as identify, estimate and validate screen. Only a design
+    // whose law identification's is: identification's exponential misfits a table's or a
+    // polynomial's spring, and on the knee spec's logs read together the misfit looked like
+    // a force read 7 to 10 ms late (z up to 3.2).
+    if opts.force_delay.screened() && matches!(design.law.law, ForceLaw::Exponential(_)) {
+        diagnosis.force_delay_screen = identification
+            .and_then(|id| crate::estimate::retime::screen_force_delay(&reduced, &noise, &id));
+    }
     Ok((design, diagnosis))
 }
 

@@ -1225,6 +1225,21 @@ pub fn format_diagnosis(d: &crate::verdict::diagnose::Diagnosis) -> String {
     );
     if let Some(delay) = &d.force_delay {
         s.push_str(&force_delay_line(delay));
+        if !delay.parameter_std.is_empty() {
+            let parts: Vec<String> = delay
+                .parameter_std
+                .iter()
+                .map(|(k, v)| format!("{k} +- {v:.4}"))
+                .collect();
+            let _ = writeln!(
+                s,
+                "  its uncertainty is carried into the standard deviations below ({})",
+                parts.join(", ")
+            );
+        }
+    }
+    if let Some(screen) = &d.force_delay_screen {
+        s.push_str(&force_delay_screen_line(screen));
     }
     if d.findings.is_empty() {
         s.push_str("  no build parameter is off its design beyond its uncertainty\n");

@@ -318,6 +318,9 @@ pub struct Diagnosis {
     /// The force channel's delay the force was re-timed by before the diagnosis, if any (set
     /// by the caller that re-timed it).
     pub force_delay: Option<crate::estimate::retime::ForceDelayFit>,
+    /// Where no delay was asked for, what identification's profile says of one (set by the
+    /// caller that screened the log; None where it was not screened).
+    pub force_delay_screen: Option<crate::estimate::retime::ForceDelayScreen>,
 }
 
 impl Diagnosis {
@@ -346,6 +349,48 @@ impl Diagnosis {
             BuildParam::Friction => &self.friction,
             BuildParam::Zero => &self.zero_offset_mm,
         }
+    }
+
+    fn get_mut(&mut self, p: BuildParam) -> &mut Fitted {
+        match p {
+            BuildParam::SpringRate => &mut self.spring_rate_scale,
+            BuildParam::Preload => &mut self.preload_offset_mm,
+            BuildParam::Friction => &mut self.friction,
+            BuildParam::Zero => &mut self.zero_offset_mm,
+        }
+    }
+
+    /// Carries the standard deviation of a fitted force delay, which the log was re-timed by,
+    /// into the build's fitted parameters and the outside friction d0: `plus` and `minus`
+    /// diagnose the same log re-timed by the delay plus and minus its standard deviation, and
+    /// half of each one's change is added to its standard deviation in quadrature (and noted
+    /// in [`Diagnosis::force_delay`]'s `parameter_std`). A parameter the wider deviation no
+    /// longer resolves is unresolved, and the findings are judged again. The delay moves the
+    /// contact friction most: a load cell read late makes the loading and unloading strokes
+    /// part like friction does (on the independent rig's default transmission read 15 ms
+    /// late, the friction moved by 1.4 of its own standard deviations over +-1 of the delay's,
+    /// the spring rate by 0.1).
+    pub fn carry_delay_uncertainty(&mut self, plus: &Diagnosis, minus: &Diagnosis) {
+        for (param, limit) in RESOLUTION {
+            let change = 0.5 * (plus.get(param).value - minus.get(param).value);
+            let f = self.get_mut(param);
+            if f.fixed || !change.is_finite() {
+                continue;
+            }
+            f.std = f.std.hypot(change);
+            f.resolved = f.resolved && 3.0 * f.std <= limit;
+            if let Some(d) = self.force_delay.as_mut() {
+                d.parameter_std.insert(param.key(), change.abs());
+            }
+        }
+        let change = 0.5 * (plus.d0_n[0] - minus.d0_n[0]);
+        if change.is_finite() {
+            self.d0_n[1] = self.d0_n[1].hypot(change);
+            if let Some(d) = self.force_delay.as_mut() {
+                d.parameter_std.insert("d0_n", change.abs());
+            }
+        }
+        describe(self);
     }
 }
 
@@ -1465,6 +1510,7 @@ pub fn diagnose(
     };
     let mut diagnosis = Diagnosis {
         force_delay: None,
+        force_delay_screen: None,
         spring_rate_scale: fitted(
             0,
             1.0 + p[0],
@@ -1752,6 +1798,89 @@ fn describe(d: &mut Diagnosis) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A diagnosis with every build parameter fitted at `friction` for the contact friction
+    /// (designed 0) and on its design otherwise, each to +-`std` (the zero held), and the
+    /// force re-timed by a fitted delay.
+    fn fitted_friction(friction: f64, std: f64) -> Diagnosis {
+        let fitted = |value: f64, designed: f64| Fitted {
+            value,
+            std,
+            designed,
+            resolved: true,
+            fixed: false,
+            zero_correlation: 0.0,
+        };
+        Diagnosis {
+            force_delay: Some(crate::estimate::retime::ForceDelayFit {
+                std_s: Some(0.003),
+                fitted: true,
+                ..crate::estimate::retime::ForceDelayFit::given(0.015)
+            }),
+            force_delay_screen: None,
+            spring_rate_scale: fitted(1.0, 1.0),
+            preload_offset_mm: fitted(0.0, 0.0),
+            friction: fitted(friction, 0.0),
+            zero_offset_mm: Fitted {
+                fixed: true,
+                ..fitted(0.0, 0.0)
+            },
+            m_n_s2_per_mm: 0.05,
+            d0_n: [0.0, 0.01],
+            d1_n_s_per_mm: 0.2,
+            d2_n_s3_per_mm3: 0.0,
+            reduced_chi2: 1.0,
+            samples: 1000,
+            force_error_before_percent: 0.0,
+            force_error_after_percent: 0.0,
+            findings: Vec::new(),
+            unresolved: Vec::new(),
+            bins: Vec::new(),
+            sg_window_s: 0.5,
+            windows_tried: Vec::new(),
+            reversal_travel_share: 1.0,
+        }
+    }
+
+    #[test]
+    fn a_fitted_delays_uncertainty_widens_the_build_and_can_unmake_a_finding() {
+        // Contact friction 0.004 +- 0.0004 against 0 designed: a finding (10 standard
+        // deviations). Re-timed by the delay -+ its standard deviation the friction is 0.0015
+        // and 0.0065: half the change, 0.0025, joins its deviation in quadrature (0.00253),
+        // three of which exceed the 0.005 that resolves the friction.
+        let mut d = fitted_friction(0.004, 0.0004);
+        describe(&mut d);
+        assert_eq!(d.findings.len(), 1, "{:?}", d.findings);
+        assert!(
+            d.findings[0].contains("contact friction"),
+            "{:?}",
+            d.findings
+        );
+        let (minus, plus) = (
+            fitted_friction(0.0015, 0.0004),
+            fitted_friction(0.0065, 0.0004),
+        );
+        d.carry_delay_uncertainty(&plus, &minus);
+        let expected = 0.0004_f64.hypot(0.0025);
+        assert!(
+            (d.friction.std - expected).abs() < 1e-12,
+            "{:?}",
+            d.friction
+        );
+        assert!(!d.friction.resolved, "{:?}", d.friction);
+        assert!(d.findings.is_empty(), "{:?}", d.findings);
+        assert!(
+            d.unresolved.iter().any(|u| u.starts_with("friction")),
+            "{:?}",
+            d.unresolved
+        );
+        // The spring rate did not move with the delay: its deviation is as fitted. The change
+        // each parameter took is reported with the delay; the held zero takes none.
+        assert_eq!(d.spring_rate_scale.std, 0.0004);
+        let delay = d.force_delay.as_ref().unwrap();
+        assert!((delay.parameter_std["friction"] - 0.0025).abs() < 1e-12);
+        assert!(!delay.parameter_std.contains_key("zero_offset_mm"));
+    }
 
     /// One bin's passes from the given pass lengths: each pass's samples are its offset plus
     /// white noise (standard deviation `noise`).

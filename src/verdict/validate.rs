@@ -1254,6 +1254,7 @@ mod tests {
         };
         Diagnosis {
             force_delay: None,
+            force_delay_screen: None,
             spring_rate_scale: fitted,
             preload_offset_mm: fitted,
             friction: fitted,

@@ -1132,8 +1132,8 @@ def test_estimate_validate_and_diagnose_re_time_a_force_read_late(tmp_path):
     Read as logged, the filter's M is 6.7 % low and the diagnosis leaves 0.71 % of the force
     unexplained; with `--force-delay auto` each fits the delay and re-times the force: M within
     2 % (the filter's target), validate passes the true law and reports the delay, and the
-    diagnosis leaves less than half the force it did unexplained. Read as logged, estimate and
-    validate warn that the force looks read late."""
+    diagnosis leaves less than half the force it did unexplained. Read as logged, estimate,
+    validate, diagnose and revise warn that the force looks read late."""
     tr = Transmission(m=0.05, d0=0.0, d1=0.2, d2=-1e-4)
     log = late_log(tmp_path, tr, 4, 15)
     law = spec(tmp_path / "true.toml", tr, 1.0)
@@ -1173,8 +1173,30 @@ def test_estimate_validate_and_diagnose_re_time_a_force_read_late(tmp_path):
 
     before, after = diagnose(), diagnose("--force-delay", "auto")
     assert after["force_delay"]["fitted"], after["force_delay"]
+    # The fitted delay's standard deviation is in the build's: diagnosed with the delay given
+    # at its value and one standard deviation either side, each parameter's deviation with
+    # auto is the given one's and half the change in quadrature (the contact friction's is
+    # the largest share: a late load cell parts the strokes as friction does).
+    delay, std = after["force_delay"]["delay_s"], after["force_delay"]["std_s"]
+    at = {k: diagnose("--force-delay", f"{(delay + k * std) * 1e3:.6f}ms") for k in (-1, 0, 1)}
+    for key in ("spring_rate_scale", "preload_offset_mm", "friction"):
+        change = 0.5 * (at[1][key]["value"] - at[-1][key]["value"])
+        expected = math.hypot(at[0][key]["std"], change)
+        assert abs(after[key]["std"] / expected - 1.0) < 0.05, (key, after[key], at[0][key], change)
+        assert after[key]["resolved"] and abs(after[key]["value"] - after[key]["designed"]) < 3.0 * after[key]["std"], after[key]
+    assert after["friction"]["std"] > 1.3 * at[0]["friction"]["std"], (after["friction"], at[0]["friction"])
     assert after["force_error_after_percent"] < 0.5 * before["force_error_after_percent"], (
         before["force_error_after_percent"], after["force_error_after_percent"])
+    # Read as logged, the diagnosis (and the revision resting on it) warns too; with auto it
+    # screens nothing.
+    screen = before["force_delay_screen"]
+    assert screen["suspected"] and abs(screen["delay_s"] - 0.015) < 3.0 * screen["std_s"], screen
+    assert after["force_delay_screen"] is None, after["force_delay_screen"]
+    text = camspring("diagnose", law, log)
+    assert "WARNING: the force looks read" in text.stdout and "--force-delay auto" in text.stdout, text.stdout
+    r = camspring("revise", law, log, "--json", "-o", tmp_path / "rev")
+    assert r.returncode in (0, 1), r.stderr + r.stdout[-2000:]
+    assert json.loads(r.stdout)["diagnosis"]["force_delay_screen"]["suspected"], r.stdout[-2000:]
 
 
 def test_a_log_that_does_not_determine_the_force_delay_says_so(tmp_path):
