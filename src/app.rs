@@ -518,17 +518,34 @@ fn retime_in_memory(
     window_s: Option<f64>,
 ) -> Result<Option<crate::estimate::retime::ForceDelayFit>> {
     use crate::estimate::identify::Reduction;
-    use crate::estimate::retime::{fit_force_delay, retime_log, RowDelay};
+    use crate::estimate::retime::fit_force_delay;
     let Some(delay) =
         force_delay.resolve(|| fit_force_delay(&Reduction::of_log(log), noise, window_s))?
     else {
         return Ok(None);
     };
-    let rows = RowDelay::of_log(delay.delay_s, log.dt_s())
-        .map_err(|e| Error::Argument(format!("--force-delay: {e}")))?;
-    noise.force_variance_n2 *= rows.noise_variance_factor();
-    *log = retime_log(log, rows);
+    (*log, *noise) = retimed(log, noise, delay.delay_s)?;
     Ok(Some(delay))
+}
+
+/// `log` with its force re-timed by a delay of `delay_s`, and the force noise the
+/// interpolation leaves.
+fn retimed(
+    log: &crate::estimate::log::CalibrationLog,
+    noise: &crate::estimate::identify::SensorNoise,
+    delay_s: f64,
+) -> Result<(
+    crate::estimate::log::CalibrationLog,
+    crate::estimate::identify::SensorNoise,
+)> {
+    use crate::estimate::retime::{retime_log, RowDelay};
+    let rows = RowDelay::of_log(delay_s, log.dt_s())
+        .map_err(|e| Error::Argument(format!("--force-delay: {e}")))?;
+    let noise = crate::estimate::identify::SensorNoise {
+        force_variance_n2: noise.force_variance_n2 * rows.noise_variance_factor(),
+        ..*noise
+    };
+    Ok((retime_log(log, rows), noise))
 }
 
 /// Prints the warnings of a run's sensor noise (a given variance the log contradicts).
@@ -1542,15 +1559,7 @@ fn diagnose_log(
     if let (Some((raw, raw_noise)), Some(d)) = (&raw, &diagnosis.force_delay) {
         if let Some(std) = d.std_s.filter(|s| *s > 0.0) {
             let at = |delay_s: f64| {
-                let mut log = raw.clone();
-                let mut noise = *raw_noise;
-                retime_in_memory(
-                    &mut log,
-                    &mut noise,
-                    ForceDelay::Seconds(delay_s),
-                    opts.window_s,
-                )
-                .ok()?;
+                let (log, noise) = retimed(raw, raw_noise, delay_s).ok()?;
                 diagnose(&log, &noise).ok()
             };
             if let (Some(plus), Some(minus)) = (at(d.delay_s + std), at(d.delay_s - std)) {

@@ -394,6 +394,36 @@ impl Diagnosis {
     }
 }
 
+#[cfg(test)]
+impl Diagnosis {
+    /// A diagnosis for unit tests: every build parameter `fitted`, no dynamics, a fit of 1000
+    /// samples at a reduced chi-square of 1, and `bins` as its curves.
+    pub(crate) fn fixture(fitted: Fitted, bins: Vec<DiagnosisBin>) -> Diagnosis {
+        Diagnosis {
+            force_delay: None,
+            force_delay_screen: None,
+            spring_rate_scale: fitted,
+            preload_offset_mm: fitted,
+            friction: fitted,
+            zero_offset_mm: fitted,
+            m_n_s2_per_mm: 0.0,
+            d0_n: [0.0, 0.0],
+            d1_n_s_per_mm: 0.0,
+            d2_n_s3_per_mm3: 0.0,
+            reduced_chi2: 1.0,
+            samples: 1000,
+            force_error_before_percent: 0.0,
+            force_error_after_percent: 0.0,
+            findings: Vec::new(),
+            unresolved: Vec::new(),
+            bins,
+            sg_window_s: 0.5,
+            windows_tried: Vec::new(),
+            reversal_travel_share: 1.0,
+        }
+    }
+}
+
 /// Parameters of the fit: the four build ones, then m, d0, d1, d2.
 const P: usize = 8;
 
@@ -1817,7 +1847,6 @@ mod tests {
                 fitted: true,
                 ..crate::estimate::retime::ForceDelayFit::given(0.015)
             }),
-            force_delay_screen: None,
             spring_rate_scale: fitted(1.0, 1.0),
             preload_offset_mm: fitted(0.0, 0.0),
             friction: fitted(friction, 0.0),
@@ -1825,20 +1854,7 @@ mod tests {
                 fixed: true,
                 ..fitted(0.0, 0.0)
             },
-            m_n_s2_per_mm: 0.05,
-            d0_n: [0.0, 0.01],
-            d1_n_s_per_mm: 0.2,
-            d2_n_s3_per_mm3: 0.0,
-            reduced_chi2: 1.0,
-            samples: 1000,
-            force_error_before_percent: 0.0,
-            force_error_after_percent: 0.0,
-            findings: Vec::new(),
-            unresolved: Vec::new(),
-            bins: Vec::new(),
-            sg_window_s: 0.5,
-            windows_tried: Vec::new(),
-            reversal_travel_share: 1.0,
+            ..Diagnosis::fixture(fitted(0.0, 0.0), Vec::new())
         }
     }
 

@@ -1252,28 +1252,7 @@ mod tests {
             fixed: false,
             zero_correlation: 0.0,
         };
-        Diagnosis {
-            force_delay: None,
-            force_delay_screen: None,
-            spring_rate_scale: fitted,
-            preload_offset_mm: fitted,
-            friction: fitted,
-            zero_offset_mm: fitted,
-            m_n_s2_per_mm: 0.0,
-            d0_n: [0.0, 0.0],
-            d1_n_s_per_mm: 0.0,
-            d2_n_s3_per_mm3: 0.0,
-            reduced_chi2: 1.0,
-            samples: 1000,
-            force_error_before_percent: 0.0,
-            force_error_after_percent: 0.0,
-            findings: Vec::new(),
-            unresolved: Vec::new(),
-            bins,
-            sg_window_s: 0.5,
-            windows_tried: Vec::new(),
-            reversal_travel_share: 1.0,
-        }
+        Diagnosis::fixture(fitted, bins)
     }
 
     #[test]
