@@ -47,7 +47,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 dynamics,
                 ..SimSettings::default()
             };
-            let (log, _) = simulate(law, 15.0, 500.0, &settings).ok()?;
+            let debug = std::env::var_os("NEES_DEBUG").is_some();
+            let (log, _) = match simulate(law, 15.0, 500.0, &settings) {
+                Ok(made) => made,
+                Err(e) => {
+                    if debug {
+                        eprintln!("seed {seed}: not simulated: {e}");
+                    }
+                    return None;
+                }
+            };
             let mut opts = EstimateOptions::new(SensorNoise::default());
             for (name, state) in [
                 ("Q_D", camspring::estimate::pipeline::StateName::D),
@@ -61,7 +70,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             if let Some(n) = std::env::var("TWINS").ok().and_then(|v| v.parse().ok()) {
                 opts.twins = n;
             }
-            let run = estimate(&log, &opts, |_, _| {}).ok()?;
+            let run = match estimate(&log, &opts, |_, _| {}) {
+                Ok(run) => run,
+                Err(e) => {
+                    if debug {
+                        eprintln!("seed {seed}: no estimate: {e}");
+                    }
+                    return None;
+                }
+            };
             let z = run.run.last.z;
             let p = run.run.last.p;
             let truth = [
@@ -69,7 +86,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 law.k2_per_mm,
                 dynamics.d2_n_s3_per_mm3,
             ];
-            if std::env::var_os("NEES_DEBUG").is_some() {
+            if debug {
                 use camspring::estimate::identify::Param;
                 let id = run.identification.as_ref()?;
                 let own = run.std_before_disagreement;
@@ -82,7 +99,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     id.get(Param::M).value.unwrap_or(f64::NAN), id.get(Param::M).std.unwrap_or(f64::NAN),
                 );
             }
-            let error = run.run.last.constants_error(truth)?;
+            let Some(error) = run.run.last.constants_error(truth) else {
+                if debug {
+                    eprintln!("seed {seed}: the constants' covariance is not positive definite");
+                }
+                return None;
+            };
             Some((error, run.consistency.consistent))
         })
         .collect();
