@@ -436,18 +436,28 @@ fn estimate_warns_when_the_log_is_too_short_for_its_target_and_says_how_much_lon
     assert!(longest > 1.0, "{warned:?}");
     assert!(longest < 40.0, "{warned:?}");
     let long = run(30.0 * longest * 1.5);
-    // The filter's own standard deviations reach the target. One may still be held above it
-    // by the filter's disagreement with identification, which a longer log shrinks only if it
-    // is random, or (M) by identification's own deviation where that is mostly the allowance
-    // for its differentiating filter's bias; the warning then says so, and promises no length.
-    // (Seed 5's 148 s log: identification's m 0.0504 +- 0.0036, nearly all of it that
-    // allowance, held the filter's M at 1.8 %, where the 30 s log had promised the target at
-    // 1.9 times its length.)
+    // The filter's own standard deviations of the constants the warning promised a length for
+    // reach the target. One may still be held above it by the filter's disagreement with
+    // identification, which a longer log shrinks only if it is random, or (M) by
+    // identification's own deviation where that is mostly the allowance for its
+    // differentiating filter's bias; the warning then says so, and promises no length. (Seed
+    // 5's 148 s log: identification's m 0.0504 +- 0.0036, nearly all of it that allowance,
+    // held the filter's M at 1.8 %, where the 30 s log had promised the target at 1.9 times
+    // its length.) A constant the short log promised nothing for (held there) may be warned
+    // again: seed 5's M, held on 30 s by identification's bias, is at identification's
+    // deviation over 4 on 126 s, mostly noise there, and the warning asks for 2.2 times that.
+    let promised: Vec<&str> = warned
+        .iter()
+        .filter(|w| w.log_length_factor.is_some())
+        .map(|w| w.state)
+        .collect();
     let left = long.imprecise();
     assert!(
-        left.iter().all(|w| w.log_length_factor.is_none()
-            && (w.relative_disagreement.is_some() || w.relative_identification_bias.is_some())),
-        "{left:?}"
+        left.iter()
+            .filter(|w| promised.contains(&w.state))
+            .all(|w| w.log_length_factor.is_none()
+                && (w.relative_disagreement.is_some() || w.relative_identification_bias.is_some())),
+        "{left:?} (promised: {promised:?})"
     );
 }
 
