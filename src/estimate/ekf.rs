@@ -185,9 +185,11 @@ pub struct EkfSettings {
     /// held, or estimated and reported.
     pub m_nuisance_from: Option<f64>,
     /// The acceleration's process noise ((mm/s^2)^2 per s) of the error covariance the filter
-    /// reports, where it differs from the one its gains are computed with (`q[2]`): that
-    /// covariance is propagated alongside the filter's own, with the filter's gains
-    /// ([`Ekf::reported_std`]). `None`: the filter reports its own covariance.
+    /// reports for its final state, where it differs from the one its gains are computed with
+    /// (`q[2]`): that covariance is propagated alongside the filter's own, with the filter's
+    /// gains ([`Ekf::p_reported`]), and becomes the run's at its end ([`Filter::finish`]). The
+    /// rows along the run keep the filter's own standard deviations. `None`: the filter reports
+    /// its own covariance.
     pub reported_xdd_q: Option<f64>,
 }
 
@@ -422,13 +424,6 @@ impl Ekf {
     /// Standard deviation of each state (the filter's own covariance during the run).
     pub fn std(&self) -> State {
         State::from_fn(|i, _| self.p[(i, i)].max(0.0).sqrt())
-    }
-
-    /// Standard deviation of each state as the filter reports it: from the reported error
-    /// covariance where the settings give one ([`EkfSettings::reported_xdd_q`]).
-    pub fn reported_std(&self) -> State {
-        let p = self.p_reported.as_ref().unwrap_or(&self.p);
-        State::from_fn(|i, _| p[(i, i)].max(0.0).sqrt())
     }
 
     /// How far the constants [M, k2, d2] lie from known values (a simulated log's truth), in
@@ -942,7 +937,7 @@ impl Filter {
         Ok(Some(EkfRow {
             t_s: s.t_s,
             state: z,
-            std: ekf.reported_std(),
+            std: ekf.std(),
             offsets: [offsets.theta[0], offsets.theta[1]],
             offset_stds: offsets.std(),
         }))
