@@ -427,10 +427,10 @@ impl Ekf {
     }
 
     /// How far the constants [M, k2, d2] lie from known values (a simulated log's truth), in
-    /// the covariance `p` (the reported one once the run has finished, [`Filter::finish`]): their z-scores and the normalised estimation error squared
-    /// e^T P^-1 e. A held constant (no variance) counts neither in the NEES nor in its degrees
-    /// of freedom, and its z is NaN. None if the free constants' covariance is not positive
-    /// definite.
+    /// the covariance `p` (the reported one once the run has finished, [`Filter::finish`]):
+    /// their z-scores and the normalised estimation error squared e^T P^-1 e. A held constant
+    /// (no variance) counts neither in the NEES nor in its degrees of freedom, and its z is
+    /// NaN. None if the free constants' covariance is not positive definite.
     pub fn constants_error(&self, truth: [f64; 3]) -> Option<ConstantsError> {
         let ids = [idx::M, idx::K2, idx::D2];
         let free: Vec<usize> = (0..3).filter(|&i| self.p[(ids[i], ids[i])] > 0.0).collect();
@@ -1177,13 +1177,14 @@ pub fn default_settings(
 /// noise integrates to the smoothed force noise over M, which stays bounded, not to a random
 /// walk, so white process noise at the rate's variance overstates what the noise does to the
 /// constants. Gains computed with that much noise keep k2 accurate where the model is not
-/// exact (a friction at rest, a damper near its peak), and were kept; with 16 times less
+/// exact (a friction held at rest, for one), and were kept; with 16 times less
 /// noise in the gains too, the acceptance matrix's filter met its k2 target on 50 runs of 72
 /// instead of 54, and its heaviest steps' k2 went from +0.86 % to +1.72 %. The covariance
 /// the filter reports is propagated with its gains (a sensitivity analysis of a filter tuned
 /// away from its noise model) and the smaller noise: its NEES of [M, k2, d2] over simulated
-/// runs is then inside its 95 % band on seven of the nine rows of docs/CALIBRATION.md (four were
-/// outside), and barely moves from 4 to 64 (docs/CALIBRATION.md, "The reported covariance").
+/// runs is then inside its 95 % band on seven of the nine rows of docs/CALIBRATION.md (four
+/// were outside before), and barely moves for factors from 4 to 64 (docs/CALIBRATION.md, "The
+/// reported covariance").
 pub const GAIN_NOISE_INFLATION: f64 = 16.0;
 
 /// The initial state at position `x0_mm` (at rest) and sigma's initial standard deviation.
