@@ -301,9 +301,8 @@ impl Ekf {
                 z + (k1 + k2 * 2.0 + k3 * 2.0 + k4) * (dt / 6.0)
             }
         };
-        // Phi = I + G with G = A T (Euler) or A T + (A T)^2 / 2 (RK4). Only the first five
-        // rows of A are non-zero (M, k2 and d2 are constant), so G is [G5; 0] and
-        // Phi P Phi^T = P + [B; 0] + [B; 0]^T + [[B G5^T, 0], [0, 0]] with B = G5 P.
+        // Phi = I + G with G = A T (Euler) or A T + (A T)^2 / 2 (RK4); only G's first five
+        // rows, G5, are non-zero ([`propagate`]).
         let g5 = match self.settings.discretization {
             Discretization::Euler => a5,
             // (A^2) rows 0..5 = A5 A = A5[:, 0..5] A5, since A's other rows are zero.
@@ -1254,6 +1253,32 @@ mod tests {
         }
     }
 
+    /// The default settings (RK4, zero-phase rate, force variance 1e-3 N^2) for a spring of
+    /// exponent rate `k2` (value, std), a linear damper `d1` (value, std) and a held inertia `m`,
+    /// with no friction or cubic damping, read with position variance `r`; no stiffness floor.
+    fn spring_damper_mass(k2: (f64, f64), d1: (f64, f64), m: f64, r: f64, dt: f64) -> EkfSettings {
+        let init = EkfInit {
+            k2_per_mm: k2,
+            mu_n: 1.0,
+            f0_n: 0.0,
+            d0_n: 0.0,
+            m_n_s2_per_mm: (m, 0.0),
+            d1_n_s_per_mm: d1,
+            d2_n_s3_per_mm3: (0.0, 0.0),
+        };
+        let noise = crate::estimate::identify::SensorNoise::new(1e-3, r);
+        EkfSettings {
+            sigma_floor: 0.0,
+            ..default_settings(
+                &init,
+                &noise,
+                dt,
+                Discretization::Rk4,
+                ForceRate::ZERO_PHASE,
+            )
+        }
+    }
+
     /// A prediction whose damping rate D / M times the sample interval is 50: one RK4 step
     /// multiplies the acceleration's transient by about 2.4e5 (the filter lost a servo's
     /// ramp-hold log this way when its D grew), the substeps follow the closed form
@@ -1261,24 +1286,7 @@ mod tests {
     #[test]
     fn a_stiff_prediction_is_split_into_substeps_and_follows_the_closed_form() {
         let (u, d, m, dt) = (3.0, 5.0, 0.001, 0.01);
-        let mut settings = EkfSettings {
-            sigma_floor: 0.0,
-            ..default_settings(
-                &EkfInit {
-                    k2_per_mm: (0.2, 0.01),
-                    mu_n: 1.0,
-                    f0_n: 0.0,
-                    d0_n: 0.0,
-                    m_n_s2_per_mm: (m, 0.0),
-                    d1_n_s_per_mm: (d, 0.1),
-                    d2_n_s3_per_mm3: (0.0, 0.0),
-                },
-                &crate::estimate::identify::SensorNoise::new(1e-3, 1e-4),
-                dt,
-                Discretization::Rk4,
-                ForceRate::ZERO_PHASE,
-            )
-        };
+        let mut settings = spring_damper_mass((0.2, 0.01), (d, 0.1), m, 1e-4, dt);
         settings.m_floor = 0.0;
         assert_eq!(
             substeps(&State::from([0.0, 0.0, 0.0, 0.0, d, m, 0.0, 0.0]), dt),
@@ -1390,25 +1398,10 @@ mod tests {
         use rand::{rngs::StdRng, SeedableRng};
         use rand_distr::{Distribution, StandardNormal};
         let (m, d, sigma, dt, r, q) = (0.05, 0.2, 2.0, 0.01, 1e-4, 1e4);
-        let mut settings = default_settings(
-            &EkfInit {
-                k2_per_mm: (0.0, 0.0),
-                mu_n: 1.0,
-                f0_n: 0.0,
-                d0_n: 0.0,
-                m_n_s2_per_mm: (m, 0.0),
-                d1_n_s_per_mm: (d, 0.0),
-                d2_n_s3_per_mm3: (0.0, 0.0),
-            },
-            &crate::estimate::identify::SensorNoise::new(1e-3, r),
-            dt,
-            Discretization::Rk4,
-            ForceRate::ZERO_PHASE,
-        );
+        let mut settings = spring_damper_mass((0.0, 0.0), (d, 0.0), m, r, dt);
         settings.q = [0.0, 0.0, 16.0 * q, 0.0, 0.0, 0.0, 0.0, 0.0];
         settings.reported_xdd_q = Some(q);
         settings.p0_std = [0.01, 1.0, 10.0, 0.0, 0.0, 0.0, 0.0, 0.0];
-        settings.sigma_floor = 0.0;
         let (runs, steps) = (6000, 300);
         let mut rng = StdRng::seed_from_u64(7);
         let mut normal = move || -> f64 { StandardNormal.sample(&mut rng) };
