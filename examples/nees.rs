@@ -8,7 +8,8 @@
 //! The environment variables `Q_D`, `Q_XDD` and `Q_SIGMA` override the process noise of those
 //! states (tuning experiments), and `TWINS` the number of twins (0: the filter's raw constants).
 //! `NEES_DEBUG` prints, per seed, the filter's d2 and M with the standard deviation it reports and
-//! its own (before it is held to its disagreement with identification), beside identification's.
+//! its own (before it is held to its disagreement with identification), beside identification's,
+//! and k2 through the twins (the filter's own value, the twins' bias, scatter and init spread).
 
 use camspring::estimate::ekf::{idx, ConstantsError};
 use camspring::estimate::sim::{simulate, Dynamics, Profile, SimSettings};
@@ -98,6 +99,32 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     z[idx::M], p[(idx::M, idx::M)].sqrt(), own[idx::M],
                     id.get(Param::M).value.unwrap_or(f64::NAN), id.get(Param::M).std.unwrap_or(f64::NAN),
                 );
+            }
+            if debug {
+                // k2 through the twins: the filter's own value, the twins' bias, scatter and
+                // init spread, the reported value, and identification's.
+                use camspring::estimate::identify::Param;
+                let k2 = Param::K2;
+                if let (Some(id), Some(t)) = (
+                    run.identification.as_ref(),
+                    run.twins
+                        .as_ref()
+                        .and_then(|t| t.states.iter().find(|s| s.state == "k2_per_mm")),
+                ) {
+                    eprintln!(
+                        "seed {seed}: k2 filter {:.5} +- {:.5}, twins' bias {:+.5} scatter {:.5} init spread {:.5}, reported {:.5} +- {:.5} | id {:.5} +- {:.5} | truth {:.5}",
+                        t.filter,
+                        t.filter_std,
+                        t.bias,
+                        t.scatter,
+                        t.init_spread,
+                        z[idx::K2],
+                        p[(idx::K2, idx::K2)].sqrt(),
+                        id.get(k2).value.unwrap_or(f64::NAN),
+                        id.get(k2).std.unwrap_or(f64::NAN),
+                        law.k2_per_mm,
+                    );
+                }
             }
             let Some(error) = run.run.last.constants_error(truth) else {
                 if debug {
