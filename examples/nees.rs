@@ -9,7 +9,7 @@
 //! states (tuning experiments), and `TWINS` the number of twins (0: the filter's raw constants).
 //! `NEES_DEBUG` prints, per seed, the filter's d2 and M with the standard deviation it reports and
 //! its own (before it is held to its disagreement with identification), beside identification's,
-//! and k2 through the twins (the filter's own value, the twins' bias, scatter and init spread).
+//! and k2 through the twins (the filter's own value, the twins' bias, scatter and excess scatter).
 
 use camspring::estimate::ekf::{idx, ConstantsError};
 use camspring::estimate::sim::{simulate, Dynamics, Profile, SimSettings};
@@ -102,7 +102,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
             if debug {
                 // k2 through the twins: the filter's own value, the twins' bias, scatter and
-                // init spread, the reported value, and identification's.
+                // scatter beyond the filter's own, the reported value, and identification's.
                 use camspring::estimate::identify::Param;
                 let k2 = Param::K2;
                 if let (Some(id), Some(t)) = (
@@ -112,12 +112,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         .and_then(|t| t.states.iter().find(|s| s.state == "k2_per_mm")),
                 ) {
                     eprintln!(
-                        "seed {seed}: k2 filter {:.5} +- {:.5}, twins' bias {:+.5} scatter {:.5} init spread {:.5}, reported {:.5} +- {:.5} | id {:.5} +- {:.5} | truth {:.5}",
+                        "seed {seed}: k2 filter {:.5} +- {:.5}, twins' bias {:+.5} scatter {:.5} excess {:.5}, reported {:.5} +- {:.5} | id {:.5} +- {:.5} | truth {:.5}",
                         t.filter,
                         t.filter_std,
                         t.bias,
                         t.scatter,
-                        t.init_spread,
+                        t.excess_scatter,
                         z[idx::K2],
                         p[(idx::K2, idx::K2)].sqrt(),
                         id.get(k2).value.unwrap_or(f64::NAN),

@@ -561,51 +561,6 @@ fn a_kilohertz_log_is_block_averaged_before_identification() {
     }
 }
 
-/// Identification's error draws (the twins' starts) have identification's covariance: over
-/// 4000 draws the sample variances are within 10 % of its diagonal (about 4.5 standard errors
-/// of a variance estimate) and the correlations within 0.08 of its own, and a parameter
-/// outside the covariance is never moved.
-#[test]
-fn error_draws_have_identifications_covariance() {
-    let (log, _) = run(Profile::Sines, 120.0, 3, 0.5);
-    let id = identify(&log, &SensorNoise::default()).unwrap();
-    let keys: Vec<usize> = id
-        .covariance_parameters
-        .iter()
-        .map(|n| Param::from_key(n).unwrap().index())
-        .collect();
-    assert!(keys.len() >= 5, "{:?}", id.covariance_parameters);
-    let mut rng = StdRng::seed_from_u64(17);
-    let normal = Normal::new(0.0, 1.0).unwrap();
-    let n = 4000;
-    let draws: Vec<[f64; 7]> = (0..n)
-        .map(|_| id.error_draw(std::array::from_fn(|_| normal.sample(&mut rng))))
-        .collect();
-    for k in (0..7).filter(|k| !keys.contains(k)) {
-        assert!(draws.iter().all(|d| d[k] == 0.0), "{} moved", PARAMS[k]);
-    }
-    let cov = |a: usize, b: usize| draws.iter().map(|d| d[a] * d[b]).sum::<f64>() / n as f64;
-    for (i, &a) in keys.iter().enumerate() {
-        let va = id.covariance[i][i];
-        let sa = cov(a, a);
-        assert!(
-            (sa / va - 1.0).abs() < 0.1,
-            "{}: {sa} against {va}",
-            PARAMS[a]
-        );
-        for (j, &b) in keys.iter().enumerate().skip(i + 1) {
-            let rho = id.covariance[i][j] / (va * id.covariance[j][j]).sqrt();
-            let r = cov(a, b) / (sa * cov(b, b)).sqrt();
-            assert!(
-                (r - rho).abs() < 0.08,
-                "{} {}: {r} against {rho}",
-                PARAMS[a],
-                PARAMS[b]
-            );
-        }
-    }
-}
-
 /// A motion controller's point-to-point moves between random levels, with 1 s holds, on the
 /// paper's Table I transmission, its friction holding the rod at rest with the sign of the last
 /// motion: trapezoidal velocity (the acceleration steps at each move's four corners), its

@@ -448,39 +448,6 @@ impl Identification {
     pub fn get(&self, p: Param) -> Estimate {
         self.parameters.get(p)
     }
-
-    /// An error of the kind identification makes: `normals` (independent standard normal
-    /// draws, one per parameter in model order) through a square root of [`Self::covariance`],
-    /// so that correlated parameters err together (on a trapezoidal move at one speed, a d0
-    /// low by 0.4 N comes with a d1 high by 0.4 N over that speed). Parameters outside the
-    /// covariance (not identifiable) get zero.
-    pub fn error_draw(&self, normals: [f64; 7]) -> [f64; 7] {
-        let keys: Vec<usize> = self
-            .covariance_parameters
-            .iter()
-            .filter_map(|n| Param::from_key(n).map(Param::index))
-            .collect();
-        let n = keys.len();
-        let mut out = [0.0; 7];
-        if n == 0 || self.covariance.len() != n || self.covariance.iter().any(|r| r.len() != n) {
-            return out;
-        }
-        let c = DMatrix::from_fn(n, n, |i, j| self.covariance[i][j]);
-        // A symmetric square root through the eigenvalues (negative ones, rounding, as zero):
-        // the covariance can be near singular where parameters are strongly correlated.
-        let Some(e) = eigen(c) else {
-            return out;
-        };
-        let root = &e.eigenvectors
-            * DMatrix::from_diagonal(&e.eigenvalues.map(|v| v.max(0.0).sqrt()))
-            * e.eigenvectors.transpose();
-        let z = DVector::from_fn(n, |i, _| normals[keys[i]]);
-        let d = root * z;
-        for (i, &k) in keys.iter().enumerate() {
-            out[k] = d[i];
-        }
-        out
-    }
 }
 
 /// How identification regresses the force on the dynamic samples.

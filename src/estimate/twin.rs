@@ -16,18 +16,23 @@
 //!   the model requires; the smoothing before it keeps the motion's shape and removes the
 //!   noise. A causal low-pass alone at the window's band did neither: on a heavy
 //!   transmission's ramp-hold it weakened the accelerations and moved M's bias by 1.5 %.
-//! - **Force:** m xdd + d1 xd + d2 xd^3 + d0 sgn(xd) + mu exp(k2 x) + F0 along that motion, the
-//!   friction's sign taken where the velocity is beyond its noise.
+//! - **Force:** m xdd + d1 xd + d2 xd^3 + d0 s + mu exp(k2 x) + F0 along that motion, with the
+//!   friction's sign s as below.
 //! - **Noise:** fresh white noise at the sensors' variances, a different seed per twin.
+//! - **Friction:** d0 in the sliding direction until the motion's velocity reaches zero (the
+//!   stop), none from there until the velocity leaves the band its smoothed noise keeps it in;
+//!   the start is then placed where the velocity last left zero. A rod's friction turns on
+//!   when it starts and off when it stops; a twin whose friction switched at the band (until
+//!   2026-11-29) dropped it before each stop and picked it up late, and did not identify like
+//!   the log (reduced chi-square 13.8 on a simulated Table I ramp-hold at the log's window).
 //!
-//! The filter and its friction stage run on each twin as on the log, from identification's
-//! error drawn from its covariance (the filter's start and the stage's model alike), in
-//! antithetic pairs: twins 2p and 2p + 1 take the same draw with opposite signs, on the same
-//! noise. Each twin's error in k2 is known. The mean of the pairs' means is the bias (the draw's
-//! first-order effect cancels in a pair); the RMS of their half differences is the init spread,
-//! what identification's error does to the filter's k2. The pipeline subtracts the bias and adds
-//! its uncertainty, the twins' scatter (if wider than the filter's own standard deviation) and
-//! the init spread to the variance ([`TwinBias::new`]).
+//! Each twin is identified as the log was (at its window), and its friction stage and filter
+//! run as on the log, from the twin's own identification (the filter's start and the stage's
+//! model alike): its identification's error is correlated with its noise as the log's is with
+//! the log's. Each twin's error in k2 is known. Their mean is the bias; their scatter beyond the
+//! filter's own standard deviation is what identification's error does to the filter's k2.
+//! The pipeline subtracts the bias and adds its uncertainty and that excess scatter to the
+//! variance ([`TwinBias::new`]).
 
 use std::collections::VecDeque;
 
@@ -116,6 +121,12 @@ pub struct TwinSource {
     last: Option<f64>,
     motion: MotionFilter,
     band_mm_per_s: f64,
+    /// The friction's sign now: that of the sliding direction, 0 at rest.
+    sliding: f64,
+    /// The motion at rest, held back (up to `rest_lookback` samples) until it is known whether
+    /// a start has begun among them.
+    rest: VecDeque<(usize, f64, [f64; 3])>,
+    rest_lookback: usize,
     rng: StdRng,
     force_std_n: f64,
     position_std_mm: f64,
@@ -133,6 +144,11 @@ pub const TWIN_KERNEL_POINTS: usize = 701;
 /// off on heavy ramp-hold runs; at 8 the side lobes' noise made a jerky motion whose M bias
 /// was 3 % off on sines; k2's bias moved little over that range.
 pub const TWIN_MOTION_CUTOFF_WINDOWS: f64 = 3.0;
+
+/// How far back a twin's start may be placed, in smoothing windows: the smoothed velocity of
+/// a move that starts gently (a quintic ramp's grows with the square of the time) leaves the
+/// noise's band up to a window or more after the move began.
+pub const REST_LOOKBACK_WINDOWS: usize = 4;
 
 impl TwinSource {
     /// A twin of a log sampled every `dt_s`, smoothed over `window` samples, with white
@@ -169,6 +185,9 @@ impl TwinSource {
             last: None,
             motion,
             band_mm_per_s,
+            sliding: 0.0,
+            rest: VecDeque::new(),
+            rest_lookback: REST_LOOKBACK_WINDOWS * (2 * diff.half * stride + 1),
             rng: StdRng::seed_from_u64(seed),
             force_std_n: force_variance_n2.max(0.0).sqrt(),
             position_std_mm: position_variance_mm2.max(0.0).sqrt(),
@@ -211,19 +230,61 @@ impl TwinSource {
         while let Some((j, t)) = self.waiting.pop_front() {
             self.emit(j, t, x);
         }
+        while let Some((j, t, motion)) = self.rest.pop_front() {
+            self.output(j, t, motion, 0.0);
+        }
     }
 
     /// The twin's sample `i` at time `t_s`, its motion driven by the smoothed position.
+    ///
+    /// Friction slides with the motion until its velocity reaches zero (the stop), and is
+    /// held from there until the velocity leaves the band its noise keeps it in; the start is
+    /// then placed where the velocity last left zero, up to `rest_lookback` samples back, as
+    /// the rod's friction turns on when it starts to move, not when it is seen moving.
     fn emit(&mut self, i: usize, t_s: f64, smoothed_mm: f64) {
-        let [x, v, a] = self.motion.push(smoothed_mm);
-        let t = &self.truth;
-        let sign = if v > self.band_mm_per_s {
-            1.0
-        } else if v < -self.band_mm_per_s {
-            -1.0
+        let motion = self.motion.push(smoothed_mm);
+        let v = motion[1];
+        if self.sliding != 0.0 {
+            if v * self.sliding > 0.0 {
+                self.output(i, t_s, motion, self.sliding);
+                return;
+            }
+            self.sliding = 0.0;
+        }
+        if v.abs() > self.band_mm_per_s {
+            let s = v.signum();
+            // After the last sample that did not move the new way, or (a rest whose velocity
+            // never crossed zero) the one that moved that way least.
+            let from = match self.rest.iter().rposition(|(_, _, m)| m[1] * s <= 0.0) {
+                Some(k) => k + 1,
+                None => self
+                    .rest
+                    .iter()
+                    .enumerate()
+                    .min_by(|a, b| (a.1 .2[1] * s).total_cmp(&(b.1 .2[1] * s)))
+                    .map_or(0, |(k, _)| k + 1),
+            };
+            for k in 0..self.rest.len() {
+                let (j, t, m) = self.rest[k];
+                self.output(j, t, m, if k >= from { s } else { 0.0 });
+            }
+            self.rest.clear();
+            self.sliding = s;
+            self.output(i, t_s, motion, s);
         } else {
-            0.0
-        };
+            self.rest.push_back((i, t_s, motion));
+            if self.rest.len() > self.rest_lookback {
+                if let Some((j, t, m)) = self.rest.pop_front() {
+                    self.output(j, t, m, 0.0);
+                }
+            }
+        }
+    }
+
+    /// The twin's sample `i`: the model's force along `motion` with friction of sign `sign`,
+    /// and the sensors' noise.
+    fn output(&mut self, i: usize, t_s: f64, [x, v, a]: [f64; 3], sign: f64) {
+        let t = &self.truth;
         let force = t.m_n_s2_per_mm * a
             + t.d1_n_s_per_mm * v
             + t.d2_n_s3_per_mm3 * v * v * v
@@ -257,24 +318,24 @@ pub struct TwinState {
     pub filter: f64,
     /// The filter's own standard deviation on the log.
     pub filter_std: f64,
-    /// Each twin's error (estimate minus truth; None where its filter diverged), in
-    /// antithetic pairs: twins 2p and 2p + 1 start from identification's error drawn with
-    /// opposite signs, on the same noise.
+    /// Each twin's error (estimate minus truth; None where the twin was left out: its
+    /// identification did not fit it, or its filter diverged). Every twin has its own noise
+    /// and starts from its own identification.
     pub errors: Vec<Option<f64>>,
-    /// The mean of the pairs' means: the bias taken out (identification's error, drawn with
-    /// both signs, cancels in it to first order).
+    /// The mean of the twins' errors: the bias taken out.
     pub bias: f64,
-    /// The standard deviation of the pairs' means about their mean: the filter's own scatter
-    /// on the twins (with fewer than two complete pairs, that of the twins that ran, which
-    /// then holds the init spread as well).
+    /// The standard deviation of the twins' errors about their mean: the filter's scatter on
+    /// the twins, identification's error included.
     pub scatter: f64,
-    /// The RMS of the pairs' half differences: how far identification's error, drawn from its
-    /// covariance, moves the filter's value.
-    pub init_spread: f64,
+    /// The scatter beyond the filter's own standard deviation (scaled to the twins' span):
+    /// what identification's error, through the filter's start and the friction stage's
+    /// model, moves the filter's value by. A longer log does not shrink it.
+    pub excess_scatter: f64,
     /// The reported value: filter minus bias.
     pub corrected: f64,
-    /// Its standard deviation: the larger of the filter's and the scatter, with the bias's
-    /// own uncertainty (scatter^2 / pairs) and the init spread added.
+    /// Its standard deviation: the filter's own (or the scatter scaled to the log's length,
+    /// if larger and nothing exceeds the filter's own), the excess scatter, and the bias's
+    /// own uncertainty (scatter^2 / twins).
     pub corrected_std: f64,
 }
 
@@ -295,12 +356,11 @@ pub struct TwinBias {
 
 impl TwinBias {
     /// Combines the twins' errors on each constant with the filter's value on the log.
-    /// `constants` holds (name, filter value, filter std, errors), the errors in antithetic
-    /// pairs (see [`TwinState::errors`]); with fewer than two complete pairs the twins that ran
-    /// count as independent draws, and with fewer than two of those the constant is left out. The twins copy `span_s` of a log `log_s` long: where the log is longer, the
-    /// twins' scatter is that of a shorter run, and is scaled by sqrt(span / log) before it
-    /// is compared with the filter's standard deviation. The init spread is not scaled: the
-    /// filter's start comes from the same identification whatever the log's length.
+    /// `constants` holds (name, filter value, filter std, errors), one error per twin (None
+    /// where it was left out); with fewer than two errors the constant is left out. The twins
+    /// copy `span_s` of a log `log_s` long: where the log is longer, the twins' scatter is that
+    /// of a shorter run, and the part of it the filter's own standard deviation explains is
+    /// scaled by sqrt(span / log).
     pub fn new(
         twins: usize,
         span_s: f64,
@@ -308,7 +368,7 @@ impl TwinBias {
         smoothing_window_s: f64,
         constants: Vec<(&'static str, f64, f64, Vec<Option<f64>>)>,
     ) -> TwinBias {
-        let mut diverged = 0;
+        let mut left_out = 0;
         let share = if log_s > span_s && span_s > 0.0 {
             span_s / log_s
         } else {
@@ -317,33 +377,30 @@ impl TwinBias {
         let states = constants
             .into_iter()
             .filter_map(|(state, filter, filter_std, errors)| {
-                diverged = diverged.max(errors.iter().filter(|e| e.is_none()).count());
-                let (means, halves): (Vec<f64>, Vec<f64>) = errors
-                    .chunks_exact(2)
-                    .filter_map(|p| Some(((p[0]? + p[1]?) / 2.0, (p[0]? - p[1]?) / 2.0)))
-                    .unzip();
-                // With fewer than two complete pairs (twins diverged), the twins that ran are
-                // taken as independent draws: their scatter then holds the init spread too.
+                left_out = left_out.max(errors.iter().filter(|e| e.is_none()).count());
                 let present: Vec<f64> = errors.iter().flatten().copied().collect();
-                let (units, init_spread) = if means.len() >= 2 {
-                    let n = means.len() as f64;
-                    (
-                        means,
-                        (halves.iter().map(|h| h * h).sum::<f64>() / n).sqrt(),
-                    )
-                } else if present.len() >= 2 {
-                    (present, 0.0)
-                } else {
+                let n = present.len();
+                if n < 2 {
                     return None;
+                }
+                let bias = present.iter().sum::<f64>() / n as f64;
+                let scatter = (present.iter().map(|e| (e - bias).powi(2)).sum::<f64>()
+                    / (n - 1) as f64)
+                    .sqrt();
+                // The twins' scatter beyond the filter's own standard deviation over their
+                // span is what identification's error (and whatever else the filter does not
+                // count) does to the filter. It does not shrink on a longer log: identification
+                // sees only the span. The rest is the filter's own spread, which does.
+                let own_span = filter_std / share.sqrt();
+                let excess = (scatter * scatter - own_span * own_span).max(0.0).sqrt();
+                let own = if excess > 0.0 {
+                    filter_std
+                } else {
+                    (scatter * share.sqrt()).max(filter_std)
                 };
-                let n = units.len();
-                let bias = units.iter().sum::<f64>() / n as f64;
-                let scatter =
-                    (units.iter().map(|e| (e - bias).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt();
-                // The estimate's own spread on the log's length, and the bias's uncertainty:
-                // the twins' errors scatter at least as the filter's would over their span.
-                let spread = (scatter * share.sqrt()).max(filter_std);
-                let twin_spread = scatter.max(filter_std / share.sqrt());
+                // The bias's own uncertainty: the twins' errors scatter at least as the
+                // filter's would over their span.
+                let twin_spread = scatter.max(own_span);
                 let bias_variance = twin_spread * twin_spread / n as f64;
                 Some(TwinState {
                     state,
@@ -351,17 +408,16 @@ impl TwinBias {
                     filter_std,
                     bias,
                     scatter,
-                    init_spread,
+                    excess_scatter: excess,
                     corrected: filter - bias,
-                    corrected_std: (spread * spread + bias_variance + init_spread * init_spread)
-                        .sqrt(),
+                    corrected_std: (own * own + excess * excess + bias_variance).sqrt(),
                     errors,
                 })
             })
             .collect();
         TwinBias {
             twins,
-            diverged,
+            diverged: left_out,
             span_s,
             smoothing_window_s,
             states,
@@ -485,11 +541,11 @@ mod tests {
     }
 
     #[test]
-    fn the_bias_is_the_mean_of_the_pairs_and_the_std_grows_with_their_scatter_and_spread() {
-        // Three antithetic pairs: means -0.004, -0.003, -0.005 (bias -0.004, scatter 1e-3);
-        // half differences 1e-3, -2e-3, 2e-3 (init spread sqrt(9e-6 / 3) = 1.732e-3). A fourth
-        // pair with a diverged twin counts as diverged and is left out.
-        let pairs = [
+    fn the_bias_is_the_mean_of_the_twins_and_the_std_grows_with_their_excess_scatter() {
+        // Six twins: errors -0.003, -0.005, -0.005, -0.001, -0.003, -0.007 (mean -0.004, sum
+        // of squared deviations 2.2e-5, scatter sqrt(2.2e-5 / 5) = 2.098e-3). A seventh twin
+        // left out (None) is counted, not used.
+        let six = [
             Some(-0.003),
             Some(-0.005),
             Some(-0.005),
@@ -497,10 +553,10 @@ mod tests {
             Some(-0.003),
             Some(-0.007),
         ];
-        let mut errors = pairs.to_vec();
-        errors.extend([Some(0.1), None]);
+        let mut errors = six.to_vec();
+        errors.push(None);
         let b = TwinBias::new(
-            8,
+            7,
             300.0,
             300.0,
             1.0,
@@ -512,65 +568,146 @@ mod tests {
         assert_eq!(b.states.len(), 1, "one twin is not enough for a bias");
         assert_eq!(b.diverged, 1);
         let k = &b.states[0];
+        let scatter = (2.2e-5f64 / 5.0).sqrt();
         assert!((k.bias + 0.004).abs() < 1e-12);
         assert!((k.corrected - 0.304).abs() < 1e-12);
-        assert!((k.scatter - 0.001).abs() < 1e-12);
-        assert!((k.init_spread - 3e-3f64.sqrt() * 1e-3f64.sqrt()).abs() < 1e-12);
-        // The scatter (1e-3) exceeds the filter's std; the bias's variance is it squared over
-        // three pairs; the init spread adds in full.
-        let expected = (1e-6f64 + 1e-6 / 3.0 + 3e-6).sqrt();
+        assert!((k.scatter - scatter).abs() < 1e-12);
+        // The scatter beyond the filter's own 5e-4 is identification's share.
+        let excess = (scatter * scatter - 0.0005f64.powi(2)).sqrt();
+        assert!((k.excess_scatter - excess).abs() < 1e-12);
+        // The filter's own, the excess, and the bias's variance (the scatter squared over six
+        // twins): the scatter squared in all, and a sixth of it.
+        let expected = (scatter * scatter * (1.0 + 1.0 / 6.0)).sqrt();
         assert!(
             (k.corrected_std - expected).abs() < 1e-12,
             "{}",
             k.corrected_std
         );
-        // Twins of the first hour of a day-long log: their scatter is an hour's, sqrt(24)
-        // times a day's (2.0e-4, above the filter's own 1e-4). The bias's variance is the
-        // larger of the scatter and the filter's std at an hour (4.9e-4), squared, over 3;
-        // the init spread is not scaled.
+        // Twins of the first hour of a day-long log with a filter whose own standard deviation
+        // on the day is 1e-4: over an hour it is sqrt(24) times that, 4.9e-4. The excess over
+        // it does not shrink on the day; the filter's own part does.
         let day = TwinBias::new(
             6,
             3600.0,
             86_400.0,
             1.0,
-            vec![("k2_per_mm", 0.30, 1e-4, pairs.to_vec())],
+            vec![("k2_per_mm", 0.30, 1e-4, six.to_vec())],
         );
-        // Two twins diverged in different pairs: the four that ran count as independent
-        // draws (mean -0.004, standard deviation sqrt(4e-6 / 3)).
-        let broken = TwinBias::new(
-            6,
-            300.0,
-            300.0,
-            1.0,
-            vec![(
-                "k2_per_mm",
-                0.30,
-                0.0005,
-                vec![
-                    Some(-0.003),
-                    None,
-                    Some(-0.005),
-                    None,
-                    Some(-0.003),
-                    Some(-0.005),
-                ],
-            )],
-        );
-        let k = &broken.states[0];
-        assert_eq!(broken.diverged, 2);
-        assert!((k.bias + 0.004).abs() < 1e-12);
-        assert_eq!(k.init_spread, 0.0);
-        let sd = (4e-6f64 / 3.0).sqrt();
-        assert!((k.corrected_std - (sd * sd * 1.25).sqrt()).abs() < 1e-12);
         let k = &day.states[0];
-        let scatter = 1e-3f64;
-        let twin_spread = scatter.max(1e-4 * 24f64.sqrt());
-        let spread = (scatter / 24f64.sqrt()).max(1e-4);
-        let expected = (spread * spread + twin_spread * twin_spread / 3.0 + 3e-6).sqrt();
+        let own_hour = 1e-4 * 24f64.sqrt();
+        let excess = (scatter * scatter - own_hour * own_hour).sqrt();
+        assert!((k.excess_scatter - excess).abs() < 1e-12);
+        let expected = (1e-8 + excess * excess + scatter * scatter / 6.0).sqrt();
         assert!(
             (k.corrected_std - expected).abs() < 1e-15,
             "{}",
             k.corrected_std
         );
+        // A filter whose own standard deviation exceeds the twins' scatter: no excess, and
+        // the filter's own stands, with the bias's variance at least its own over the twins.
+        let quiet = TwinBias::new(
+            6,
+            300.0,
+            300.0,
+            1.0,
+            vec![("k2_per_mm", 0.30, 0.01, six.to_vec())],
+        );
+        let k = &quiet.states[0];
+        assert_eq!(k.excess_scatter, 0.0);
+        assert!((k.corrected_std - (1e-4f64 * (1.0 + 1.0 / 6.0)).sqrt()).abs() < 1e-15);
+    }
+
+    #[test]
+    fn a_twin_s_friction_slides_to_the_stop_and_starts_where_the_motion_starts() {
+        // A noise-free ramp-hold with Coulomb friction, through the twin: while the rod moves
+        // the twin's force carries +-d0, and within its holds none, with the switches at the
+        // moves' ends (not where the smoothed velocity enters the band its noise keeps it in).
+        use crate::estimate::sim::{simulate, Dynamics, Profile, SimSettings};
+        let law = ExpLaw {
+            mu_n: 1.1,
+            k2_per_mm: 0.24,
+            f0_n: 4.0,
+        };
+        let dynamics = Dynamics {
+            m_n_s2_per_mm: 0.0,
+            d0_n: 1.0,
+            d1_n_s_per_mm: 0.0,
+            d2_n_s3_per_mm3: 0.0,
+        };
+        let mut settings = SimSettings {
+            profile: Profile::RampHold,
+            duration_s: 40.0,
+            dynamics,
+            ..SimSettings::default()
+        };
+        settings.noise.force_variance_n2 = 0.0;
+        settings.noise.position_variance_mm2 = 0.0;
+        let (log, _) = simulate(law, 15.0, 500.0, &settings).unwrap();
+        let truth = TwinTruth {
+            m_n_s2_per_mm: 0.0,
+            d0_n: 1.0,
+            d1_n_s_per_mm: 0.0,
+            d2_n_s3_per_mm3: 0.0,
+            law,
+        };
+        // A band as wide as a 0.1 mm encoder's would give: 0.01 mm^2 of position noise.
+        let mut twin = TwinSource::new(truth, 61, 0.01, 0.0, 0.01, 1);
+        twin.position_std_mm = 0.0;
+        let mut out = Vec::new();
+        for i in 0..log.len() {
+            let s = Sample {
+                t_s: log.t_s[i],
+                force_n: log.force_n[i],
+                position_mm: log.position_mm[i],
+            };
+            twin.push(i, &s);
+            out.extend(twin.out.drain(..));
+        }
+        twin.finish();
+        out.extend(twin.out.drain(..));
+        assert_eq!(out.len(), log.len());
+        assert!(out.iter().enumerate().all(|(k, (i, _))| *i == k));
+        // The twin's friction: its force less the law at its own position (noise free).
+        let friction: Vec<f64> = out
+            .iter()
+            .map(|(_, s)| s.force_n - law.force_n(s.position_mm))
+            .collect();
+        // The log's: sliding (|F - law| = d0) or held (0).
+        let sliding: Vec<bool> = (0..log.len())
+            .map(|k| (log.force_n[k] - law.force_n(log.position_mm[k])).abs() > 0.5)
+            .collect();
+        let twin_sliding: Vec<bool> = friction.iter().map(|f| f.abs() > 0.5).collect();
+        assert!(friction
+            .iter()
+            .all(|f| f.abs() < 1e-9 || (f.abs() - 1.0).abs() < 1e-9));
+        // Each of the log's moves (a run of sliding samples) is one move of the twin's, as
+        // long to within a tenth of a second at each end (the twin lags the log by its
+        // motion filter's delay, about 0.07 s here). With the friction switched at the band
+        // instead, the starts came 0.6 s late.
+        let runs = |s: &[bool]| -> Vec<(usize, usize)> {
+            let mut r = Vec::new();
+            let mut k = 0;
+            while k < s.len() {
+                if s[k] {
+                    let a = k;
+                    while k < s.len() && s[k] {
+                        k += 1;
+                    }
+                    r.push((a, k));
+                } else {
+                    k += 1;
+                }
+            }
+            r
+        };
+        let (moves, twin_moves) = (runs(&sliding), runs(&twin_sliding));
+        assert!(moves.len() >= 5, "{moves:?}");
+        assert_eq!(moves.len(), twin_moves.len(), "{moves:?} {twin_moves:?}");
+        // (A move the log ends in is left: the twin's last half window rests.)
+        for ((a, b), (c, d)) in moves.iter().zip(&twin_moves).filter(|m| m.0 .1 < log.len()) {
+            let lag = 7i64;
+            assert!((*c as i64 - *a as i64 - lag).abs() <= 10, "{a} {c}");
+            assert!((*d as i64 - *b as i64 - lag).abs() <= 10, "{b} {d}");
+        }
     }
 }

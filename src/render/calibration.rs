@@ -606,7 +606,7 @@ pub fn format_consistency(est: &EstimateRun) -> String {
                 100.0 * c.bias / c.corrected.abs().max(1e-300),
                 c.errors.len(),
                 t.span_s,
-                100.0 * c.init_spread / c.corrected.abs().max(1e-300),
+                100.0 * c.excess_scatter / c.corrected.abs().max(1e-300),
                 c.filter,
                 c.filter_std,
                 c.corrected,

@@ -342,7 +342,7 @@ pub fn validate_with(
         // the mean square beyond it (and beyond F0's, below) is a deviation of the spring.
         // Identification's error,
         // through the friction stage's model, moves the whole path as it moves k2 (the twins'
-        // init spread, relative): that share is not a deviation either. (On an independent
+        // scatter beyond the filter's own, relative): that share is not a deviation either. (On an independent
         // rig's Table I trapezoidal moves, k2 -1.75 % at z -1.5, the path stood 3.4 % off
         // the true law's line against a 3 % tolerance.)
         let init_rel = est
@@ -352,7 +352,7 @@ pub fn validate_with(
                     .iter()
                     .find(|s| s.state == crate::estimate::ekf::STATE_NAMES[idx::K2])
             })
-            .map_or(0.0, |s| s.init_spread / s.corrected.abs().max(1e-300));
+            .map_or(0.0, |s| s.excess_scatter / s.corrected.abs().max(1e-300));
         // The line is drawn through the filter's force, sigma / k2 + F0: an error in the
         // parallel filter's F0 shifts it by k2 times that error.
         let f0_std = run.offset_filter.std()[0];
