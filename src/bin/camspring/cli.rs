@@ -551,10 +551,10 @@ pub struct FilterArgs {
     /// (a day-long log's init then takes bounded memory and time).
     #[arg(long, default_value = "1h", value_parser = duration)]
     pub identify_span: f64,
-    /// Twins of the log (simulated copies with known truth, 0 to 64, in antithetic pairs; an
-    /// odd last one is not used) on which the filter's bias in k2 is measured and taken out,
-    /// and identification's error carried into its standard deviation; 0 reports the
-    /// filter's raw constants.
+    /// Twins of the log (simulated copies with known truth, 0 to 64, each identified as the
+    /// log was; at least 2 for a correction) on which the filter's bias in k2 is measured and
+    /// taken out, and identification's error carried into its standard deviation; 0 reports
+    /// the filter's raw constants.
     #[arg(long, default_value_t = 6, value_parser = clap::value_parser!(u16).range(0..=64))]
     pub twins: u16,
 }
