@@ -1541,6 +1541,31 @@ pub const TWIN_CORRECTED: [usize; 1] = [ekf::idx::K2];
 /// Seed of the twins' noise (twin j draws from this plus j).
 const TWIN_NOISE_SEED: u64 = 0x7719_0000;
 
+/// One pass over the log's first `setup.samples` samples, in chunks of 8192 (index and
+/// sample, the encoder zero taken out), each handed to `f` as it is read.
+fn for_each_span_chunk<I>(
+    open: &mut impl FnMut() -> Result<I, LogError>,
+    setup: &TwinSetup<'_>,
+    mut f: impl FnMut(&[(usize, Sample)]),
+) -> Result<(), EstimateError>
+where
+    I: Iterator<Item = Result<Sample, LogError>>,
+{
+    const CHUNK: usize = 8192;
+    let mut chunk: Vec<(usize, Sample)> = Vec::with_capacity(CHUNK);
+    let mut samples = open()?.take(setup.samples).enumerate().peekable();
+    while samples.peek().is_some() {
+        chunk.clear();
+        for (i, s) in samples.by_ref().take(CHUNK) {
+            let mut s = s?;
+            s.position_mm -= setup.offset_mm;
+            chunk.push((i, s));
+        }
+        f(&chunk);
+    }
+    Ok(())
+}
+
 /// Runs the filter on `setup.twins` twins of the log ([`super::twin`]) and compares each
 /// twin's final constants of [`TWIN_CORRECTED`] (those the log's run estimates) with the
 /// twin's truth: identification's transmission, with held states at their held values. Two
@@ -1604,25 +1629,16 @@ where
     let mut made: Vec<(TwinSource, Surveyor)> = (0..setup.twins)
         .map(|j| (source(j), Surveyor::new(span_s)))
         .collect();
-    const CHUNK: usize = 8192;
-    let mut chunk: Vec<(usize, Sample)> = Vec::with_capacity(CHUNK);
-    let mut samples = open()?.take(setup.samples).enumerate().peekable();
-    while samples.peek().is_some() {
-        chunk.clear();
-        for (i, s) in samples.by_ref().take(CHUNK) {
-            let mut s = s?;
-            s.position_mm -= setup.offset_mm;
-            chunk.push((i, s));
-        }
+    for_each_span_chunk(open, setup, |chunk| {
         made.par_iter_mut().for_each(|(source, surveyor)| {
-            for (i, s) in &chunk {
+            for (i, s) in chunk {
                 source.push(*i, s);
                 while let Some((_, t)) = source.out.pop_front() {
                     surveyor.push(t);
                 }
             }
         });
-    }
+    })?;
     let identified: Vec<Option<Identification>> = made
         .into_par_iter()
         .map(|(mut source, mut surveyor)| {
@@ -1721,16 +1737,9 @@ where
             }
         }
     };
-    let mut samples = open()?.take(setup.samples).enumerate().peekable();
-    while samples.peek().is_some() {
-        chunk.clear();
-        for (i, s) in samples.by_ref().take(CHUNK) {
-            let mut s = s?;
-            s.position_mm -= setup.offset_mm;
-            chunk.push((i, s));
-        }
+    for_each_span_chunk(open, setup, |chunk| {
         twins.par_iter_mut().for_each(|twin| {
-            for (i, s) in &chunk {
+            for (i, s) in chunk {
                 twin.source.push(*i, s);
                 while let Some((j, t)) = twin.source.out.pop_front() {
                     twin.coulomb.push(j, t);
@@ -1738,7 +1747,7 @@ where
                 feed(twin);
             }
         });
-    }
+    })?;
     let finals: Vec<Option<ekf::State>> = twins
         .into_iter()
         .map(|mut twin| {

@@ -476,39 +476,29 @@ mod tests {
         }
     }
 
-    #[test]
-    fn a_twin_follows_the_logged_motion_with_the_law_s_force() {
-        // A noise-free ramp-hold of the simulator: the twin (no noise of its own) must move
-        // as the log did and carry the law's force plus the dynamics along its own motion.
-        use crate::estimate::sim::{simulate, Dynamics, Profile, SimSettings};
-        let law = ExpLaw {
-            mu_n: 1.1,
-            k2_per_mm: 0.24,
-            f0_n: 2.0,
-        };
-        let dynamics = Dynamics {
-            m_n_s2_per_mm: 0.25,
-            d0_n: 0.0,
-            d1_n_s_per_mm: 1.5,
-            d2_n_s3_per_mm3: 0.0,
-        };
+    /// A noise-free simulated ramp-hold of `duration_s` with the given dynamics.
+    fn noise_free_ramp_hold(
+        law: ExpLaw,
+        dynamics: crate::estimate::sim::Dynamics,
+        duration_s: f64,
+    ) -> crate::estimate::log::CalibrationLog {
+        use crate::estimate::sim::{simulate, Profile, SimSettings};
         let mut settings = SimSettings {
             profile: Profile::RampHold,
-            duration_s: 60.0,
+            duration_s,
             dynamics,
             ..SimSettings::default()
         };
         settings.noise.force_variance_n2 = 0.0;
         settings.noise.position_variance_mm2 = 0.0;
-        let (log, _) = simulate(law, 15.0, 500.0, &settings).unwrap();
-        let truth = TwinTruth {
-            m_n_s2_per_mm: 0.25,
-            d0_n: 0.0,
-            d1_n_s_per_mm: 1.5,
-            d2_n_s3_per_mm3: 0.0,
-            law,
-        };
-        let mut twin = TwinSource::new(truth, 241, 0.01, 0.0, 0.0, 1);
+        simulate(law, 15.0, 500.0, &settings).unwrap().0
+    }
+
+    /// Every sample of `log` through `twin`, and the twin's samples out, in order.
+    fn through(
+        twin: &mut TwinSource,
+        log: &crate::estimate::log::CalibrationLog,
+    ) -> Vec<(usize, Sample)> {
         let mut out = Vec::new();
         for i in 0..log.len() {
             let s = Sample {
@@ -521,6 +511,34 @@ mod tests {
         }
         twin.finish();
         out.extend(twin.out.drain(..));
+        out
+    }
+
+    #[test]
+    fn a_twin_follows_the_logged_motion_with_the_law_s_force() {
+        // A noise-free ramp-hold of the simulator: the twin (no noise of its own) must move
+        // as the log did and carry the law's force plus the dynamics along its own motion.
+        use crate::estimate::sim::Dynamics;
+        let law = ExpLaw {
+            mu_n: 1.1,
+            k2_per_mm: 0.24,
+            f0_n: 2.0,
+        };
+        let dynamics = Dynamics {
+            m_n_s2_per_mm: 0.25,
+            d0_n: 0.0,
+            d1_n_s_per_mm: 1.5,
+            d2_n_s3_per_mm3: 0.0,
+        };
+        let log = noise_free_ramp_hold(law, dynamics, 60.0);
+        let truth = TwinTruth {
+            m_n_s2_per_mm: 0.25,
+            d0_n: 0.0,
+            d1_n_s_per_mm: 1.5,
+            d2_n_s3_per_mm3: 0.0,
+            law,
+        };
+        let out = through(&mut TwinSource::new(truth, 241, 0.01, 0.0, 0.0, 1), &log);
         assert_eq!(out.len(), log.len());
         let (mut worst_x, mut worst_f) = (0.0_f64, 0.0_f64);
         // Away from the ends (the first half window takes the first smoothed value), the
@@ -622,7 +640,7 @@ mod tests {
         // A noise-free ramp-hold with Coulomb friction, through the twin: while the rod moves
         // the twin's force carries +-d0, and within its holds none, with the switches at the
         // moves' ends (not where the smoothed velocity enters the band its noise keeps it in).
-        use crate::estimate::sim::{simulate, Dynamics, Profile, SimSettings};
+        use crate::estimate::sim::Dynamics;
         let law = ExpLaw {
             mu_n: 1.1,
             k2_per_mm: 0.24,
@@ -634,15 +652,7 @@ mod tests {
             d1_n_s_per_mm: 0.0,
             d2_n_s3_per_mm3: 0.0,
         };
-        let mut settings = SimSettings {
-            profile: Profile::RampHold,
-            duration_s: 40.0,
-            dynamics,
-            ..SimSettings::default()
-        };
-        settings.noise.force_variance_n2 = 0.0;
-        settings.noise.position_variance_mm2 = 0.0;
-        let (log, _) = simulate(law, 15.0, 500.0, &settings).unwrap();
+        let log = noise_free_ramp_hold(law, dynamics, 40.0);
         let truth = TwinTruth {
             m_n_s2_per_mm: 0.0,
             d0_n: 1.0,
@@ -653,18 +663,7 @@ mod tests {
         // A band as wide as a 0.1 mm encoder's would give: 0.01 mm^2 of position noise.
         let mut twin = TwinSource::new(truth, 61, 0.01, 0.0, 0.01, 1);
         twin.position_std_mm = 0.0;
-        let mut out = Vec::new();
-        for i in 0..log.len() {
-            let s = Sample {
-                t_s: log.t_s[i],
-                force_n: log.force_n[i],
-                position_mm: log.position_mm[i],
-            };
-            twin.push(i, &s);
-            out.extend(twin.out.drain(..));
-        }
-        twin.finish();
-        out.extend(twin.out.drain(..));
+        let out = through(&mut twin, &log);
         assert_eq!(out.len(), log.len());
         assert!(out.iter().enumerate().all(|(k, (i, _))| *i == k));
         // The twin's friction: its force less the law at its own position (noise free).
