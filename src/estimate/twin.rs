@@ -494,6 +494,17 @@ mod tests {
         simulate(law, 15.0, 500.0, &settings).unwrap().0
     }
 
+    /// A twin's truth: the simulated log's law and dynamics.
+    fn truth_of(law: ExpLaw, d: crate::estimate::sim::Dynamics) -> TwinTruth {
+        TwinTruth {
+            m_n_s2_per_mm: d.m_n_s2_per_mm,
+            d0_n: d.d0_n,
+            d1_n_s_per_mm: d.d1_n_s_per_mm,
+            d2_n_s3_per_mm3: d.d2_n_s3_per_mm3,
+            law,
+        }
+    }
+
     /// Every sample of `log` through `twin`, and the twin's samples out, in order.
     fn through(
         twin: &mut TwinSource,
@@ -531,13 +542,7 @@ mod tests {
             d2_n_s3_per_mm3: 0.0,
         };
         let log = noise_free_ramp_hold(law, dynamics, 60.0);
-        let truth = TwinTruth {
-            m_n_s2_per_mm: 0.25,
-            d0_n: 0.0,
-            d1_n_s_per_mm: 1.5,
-            d2_n_s3_per_mm3: 0.0,
-            law,
-        };
+        let truth = truth_of(law, dynamics);
         let out = through(&mut TwinSource::new(truth, 241, 0.01, 0.0, 0.0, 1), &log);
         assert_eq!(out.len(), log.len());
         let (mut worst_x, mut worst_f) = (0.0_f64, 0.0_f64);
@@ -653,13 +658,7 @@ mod tests {
             d2_n_s3_per_mm3: 0.0,
         };
         let log = noise_free_ramp_hold(law, dynamics, 40.0);
-        let truth = TwinTruth {
-            m_n_s2_per_mm: 0.0,
-            d0_n: 1.0,
-            d1_n_s_per_mm: 0.0,
-            d2_n_s3_per_mm3: 0.0,
-            law,
-        };
+        let truth = truth_of(law, dynamics);
         // A band as wide as a 0.1 mm encoder's would give: 0.01 mm^2 of position noise.
         let mut twin = TwinSource::new(truth, 61, 0.01, 0.0, 0.01, 1);
         twin.position_std_mm = 0.0;
