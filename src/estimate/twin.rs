@@ -303,12 +303,6 @@ impl TwinSource {
     }
 }
 
-/// A standard normal draw from `seed` (for a twin's start).
-pub fn standard_normals<const N: usize>(seed: u64) -> [f64; N] {
-    let mut rng = StdRng::seed_from_u64(seed);
-    std::array::from_fn(|_| StandardNormal.sample(&mut rng))
-}
-
 /// What the twins said about one of the filter's constants.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct TwinState {
@@ -428,6 +422,12 @@ impl TwinBias {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// N standard normal draws from `seed`.
+    fn standard_normals<const N: usize>(seed: u64) -> [f64; N] {
+        let mut rng = StdRng::seed_from_u64(seed);
+        std::array::from_fn(|_| StandardNormal.sample(&mut rng))
+    }
 
     #[test]
     fn the_motion_filter_passes_a_ramp_with_exact_derivatives_and_unit_gain() {
