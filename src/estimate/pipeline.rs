@@ -189,6 +189,31 @@ pub struct EstimateRun {
     pub std_before_disagreement: ekf::State,
     /// The sensor noise used, and where each channel's came from.
     pub noise: ResolvedNoise,
+    /// Where the friction's sign is not resolved ([`SignWindow`]) and M is therefore claimed
+    /// no more precisely than identification's; None elsewhere.
+    pub unresolved_friction_sign: Option<UnresolvedFrictionSign>,
+}
+
+/// Coulomb friction whose sign the log does not resolve: d0 at least the noise of the force
+/// the frictionless model leaves, but within four of its standard deviations at the longest
+/// sign window ([`SignWindow`]).
+///
+/// The sign is then often read wrong at starts and stops, by identification (through its
+/// smoothed velocity) and by the friction stage alike, and the filter's M takes on
+/// identification's error: on the heavy rows of docs/CALIBRATION.md (d0 0.5 N, force noise
+/// 0.13 N; ramp-holds and steps, 24 seeds each) the filter's M error had a correlation of 0.86
+/// and 0.85 with identification's and about its size (RMS 1.75 against 1.64 %, 1.56 against
+/// 1.76 %) while the filter claimed 2.2 and 3.1 times more precision (RMS z 1.87 and 1.53). On
+/// Table I's ramp-holds (d0 3.82 N, resolved) its M error was 1.07 % against identification's
+/// 1.75 %, at RMS z 1.04. There M is claimed no more precisely than identification
+/// ([`M_PRECISION_GAIN_MAX`] is 1).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct UnresolvedFrictionSign {
+    /// Coulomb friction d0 (N), as the filter started from it.
+    pub d0_n: f64,
+    /// Standard deviation of the force minus the frictionless model's at the longest sign
+    /// window, friction aside (N).
+    pub frictionless_force_std_n: f64,
 }
 
 /// A constant the filter determines less precisely than [`FILTER_TARGET_PRECISION`].
@@ -289,6 +314,17 @@ impl EstimateRun {
         (z, sd)
     }
 
+    /// How many times more precisely than identification the filter claims an M that
+    /// identification resolves: [`M_PRECISION_GAIN_MAX`], or 1 where the friction's sign is
+    /// not resolved ([`UnresolvedFrictionSign`]).
+    pub fn m_precision_gain_max(&self) -> f64 {
+        if self.unresolved_friction_sign.is_some() {
+            1.0
+        } else {
+            M_PRECISION_GAIN_MAX
+        }
+    }
+
     /// The filter's constants (k2, and M when it is estimated) whose two standard deviations
     /// exceed [`FILTER_TARGET_PRECISION`].
     pub fn imprecise(&self) -> Vec<Imprecision> {
@@ -322,7 +358,7 @@ impl EstimateRun {
                         let id = self.identification.as_ref()?;
                         let s_id = id.get(Param::M).std?;
                         let bias = id.filter_bias_std[Param::M.index()];
-                        let floor = s_id / M_PRECISION_GAIN_MAX;
+                        let floor = s_id / self.m_precision_gain_max();
                         (own * scale <= floor * (1.0 + 1e-9) && bias * bias > 0.5 * s_id * s_id)
                             .then_some(bias / scale)
                     })
@@ -499,6 +535,70 @@ pub const MAX_SIGN_WINDOW_GROWTH: usize = 2;
 /// (a smooth reversal at acceleration a spends 2 band / |a| within the velocity band).
 pub const PASSING_FACTOR: f64 = 4.0;
 
+/// The stride and kernels of a sign window of `window` samples: at most
+/// [`COULOMB_KERNEL_POINTS`] points, every stride-th sample.
+fn sign_kernels(window: usize) -> (usize, sg::Differentiator) {
+    let stride = window.div_ceil(COULOMB_KERNEL_POINTS).max(1);
+    (stride, sg::Differentiator::new((window / stride) | 1))
+}
+
+/// The window the friction stage reads the Coulomb friction's sign over, and how well it
+/// resolves it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SignWindow {
+    /// The window (samples): identification's, or longer until the frictionless model's force
+    /// is known to a quarter of d0 (its noise from the position's through the kernels, and
+    /// the force sensor's), at most [`MAX_SIGN_WINDOW_GROWTH`] times identification's.
+    pub window: usize,
+    /// Standard deviation of the force minus the frictionless model's there, friction aside (N).
+    pub predicted_std: f64,
+    /// Whether that is within a quarter of d0: where it is not, the sign read near starts,
+    /// stops and reversals is often wrong.
+    pub resolved: bool,
+}
+
+impl SignWindow {
+    /// The sign window for friction `d0` (N) with identification's frictionless `model`.
+    pub fn new(
+        d0: f64,
+        model: Option<&FrictionlessModel>,
+        stiffness_max_n_per_mm: f64,
+        window: usize,
+        noise: &SensorNoise,
+        dt: f64,
+    ) -> SignWindow {
+        let window = window.max(sg::MIN_WINDOW);
+        let longest = MAX_SIGN_WINDOW_GROWTH * window;
+        let mut window = window;
+        let mut predicted_std = noise.force_variance_n2.sqrt();
+        let mut resolved = 4.0 * predicted_std <= d0.abs();
+        if let Some(m) = model {
+            let var_x = noise.position_variance_mm2;
+            // The position noise reaches the force through the stiffness, at most its top.
+            let top = stiffness_max_n_per_mm;
+            loop {
+                let (stride, diff) = sign_kernels(window);
+                let h = dt * stride as f64;
+                let predicted = noise.force_variance_n2
+                    + m.m_n_s2_per_mm.powi(2) * diff.noise_variance(sg::ACCELERATION, var_x, h)
+                    + m.d1_n_s_per_mm.powi(2) * diff.noise_variance(sg::VELOCITY, var_x, h)
+                    + top * top * diff.noise_variance(sg::POSITION, var_x, h);
+                predicted_std = predicted.sqrt();
+                resolved = 4.0 * predicted_std <= d0.abs();
+                if resolved || window >= longest {
+                    break;
+                }
+                window = ((window as f64 * std::f64::consts::SQRT_2) as usize | 1).min(longest);
+            }
+        }
+        SignWindow {
+            window,
+            predicted_std,
+            resolved,
+        }
+    }
+}
+
 impl CoulombStage {
     fn new(
         d0: f64,
@@ -508,39 +608,16 @@ impl CoulombStage {
         noise: &SensorNoise,
         dt: f64,
     ) -> CoulombStage {
-        // The window: identification's, or longer until the frictionless model's force is
-        // known to a quarter of d0 (its noise from the position's through the kernels, and the
-        // force sensor's), so that the sign read from the force is right.
-        let kernels = |window: usize| {
-            let stride = window.div_ceil(COULOMB_KERNEL_POINTS).max(1);
-            (stride, sg::Differentiator::new((window / stride) | 1))
-        };
-        let window = window.max(sg::MIN_WINDOW);
-        let longest = MAX_SIGN_WINDOW_GROWTH * window;
-        let mut window = window;
-        let mut predicted_std = noise.force_variance_n2.sqrt();
-        if let Some(m) = model {
-            let var_x = noise.position_variance_mm2;
-            // The position noise reaches the force through the stiffness, at most its top.
-            let top = stiffness_max_n_per_mm;
-            loop {
-                let (stride, diff) = kernels(window);
-                let h = dt * stride as f64;
-                let predicted = noise.force_variance_n2
-                    + m.m_n_s2_per_mm.powi(2) * diff.noise_variance(sg::ACCELERATION, var_x, h)
-                    + m.d1_n_s_per_mm.powi(2) * diff.noise_variance(sg::VELOCITY, var_x, h)
-                    + top * top * diff.noise_variance(sg::POSITION, var_x, h);
-                predicted_std = predicted.sqrt();
-                if 4.0 * predicted_std <= d0.abs() {
-                    break;
-                }
-                if window >= longest {
-                    break;
-                }
-                window = ((window as f64 * std::f64::consts::SQRT_2) as usize | 1).min(longest);
-            }
-        }
-        let (stride, diff) = kernels(window);
+        let sign = SignWindow::new(
+            d0,
+            model.as_ref(),
+            stiffness_max_n_per_mm,
+            window,
+            noise,
+            dt,
+        );
+        let (window, predicted_std) = (sign.window, sign.predicted_std);
+        let (stride, diff) = sign_kernels(window);
         let band = 3.0
             * diff
                 .noise_variance(
@@ -1415,8 +1492,23 @@ where
         Err(e) => return Err(e),
     };
     let mut run = run;
+    let mut unresolved_friction_sign = None;
     if let Some(id) = &identification {
-        widen_to_identification(&mut run, id);
+        unresolved_friction_sign = frictionless.and_then(|model| {
+            let sign = SignWindow::new(init.d0_n, Some(&model), sigma_top, window, noise, dt);
+            (!sign.resolved && init.d0_n.abs() >= sign.predicted_std).then_some(
+                UnresolvedFrictionSign {
+                    d0_n: init.d0_n,
+                    frictionless_force_std_n: sign.predicted_std,
+                },
+            )
+        });
+        let m_gain_max = if unresolved_friction_sign.is_some() {
+            1.0
+        } else {
+            M_PRECISION_GAIN_MAX
+        };
+        widen_to_identification(&mut run, id, m_gain_max);
         let identified_s = id.samples as f64 * id.block_samples as f64 * dt;
         widen_offsets(&mut run, id, identified_s);
     }
@@ -1471,6 +1563,7 @@ where
         twins,
         std_before_disagreement,
         noise: resolved,
+        unresolved_friction_sign,
     })
 }
 
@@ -1826,7 +1919,8 @@ pub const M_PRECISION_GAIN_MAX: f64 = 4.0;
 /// Brings the filter's standard deviations of M (where identification does not resolve it
 /// to [`M_RESOLVED`]) and d2 up to identification's, where they are below; such an M's also
 /// up to its distance from identification's value. An M that identification resolves is
-/// claimed at most [`M_PRECISION_GAIN_MAX`] times more precisely than identification.
+/// claimed at most `m_gain_max` times more precisely than identification
+/// ([`M_PRECISION_GAIN_MAX`], or 1: [`UnresolvedFrictionSign`]).
 ///
 /// The filter's input, the zero-phase force rate, carries the force noise correlated over the
 /// rate window, and the filter takes it as white. For k2 this hardly matters once its bias is
@@ -1836,7 +1930,7 @@ pub const M_PRECISION_GAIN_MAX: f64 = 4.0;
 /// M to 1 to 3 % where it was 20 to 70 % off (z down to -20 on the acceptance matrix).
 /// Identification's sandwich covariance allows for correlated residuals; the filter, which
 /// sees the same log, is not allowed to claim such an M, or d2, more precisely than that.
-fn widen_to_identification(run: &mut EkfRun, id: &Identification) {
+fn widen_to_identification(run: &mut EkfRun, id: &Identification, m_gain_max: f64) {
     use super::identify::Param;
     for (k, p) in [(ekf::idx::M, Param::M), (ekf::idx::D2, Param::D2)] {
         let (Some(v), Some(s_id)) = (id.get(p).value, id.get(p).std) else {
@@ -1855,7 +1949,7 @@ fn widen_to_identification(run: &mut EkfRun, id: &Identification) {
             let lost = id.inertia_attenuation.map_or(0.0, |r| {
                 super::identify::ATTENUATION_UNCERTAINTY * (r * v).abs()
             });
-            widen(run, k, (s_id / M_PRECISION_GAIN_MAX).max(lost));
+            widen(run, k, (s_id / m_gain_max).max(lost));
             continue;
         }
         // An M that identification does not resolve is, in the filter, identification's value

@@ -551,6 +551,7 @@ pub fn estimate_json(est: &EstimateRun) -> Value {
             "relative_identification_filter_bias": w.relative_identification_bias,
         })).collect::<Vec<_>>(),
         "recovery": est.recovery,
+        "unresolved_friction_sign": est.unresolved_friction_sign,
         "twins": est.twins,
         "consistency": est.consistency,
         "settings": settings,
@@ -594,6 +595,17 @@ pub fn format_consistency(est: &EstimateRun) -> String {
     if let Some(r) = &est.recovery {
         let _ = writeln!(s, "note: {r}");
     }
+    if let (Some(u), true) = (&est.unresolved_friction_sign, est.settings.reports(idx::M)) {
+        let _ = writeln!(
+            s,
+            "note: M is claimed no more precisely than identification's: the friction d0 = \
+             {:.3} N is within four standard deviations of the force the frictionless model \
+             leaves ({:.3} N), so its sign at starts and stops is read wrong at times, by \
+             identification and the filter alike, and the filter's M shares identification's \
+             error",
+            u.d0_n, u.frictionless_force_std_n
+        );
+    }
     if let Some(t) = &est.twins {
         for c in &t.states {
             let _ = writeln!(
@@ -636,7 +648,7 @@ pub fn format_consistency(est: &EstimateRun) -> String {
                  differentiating filter's bias ({:.2} %); a longer log reduces that only where \
                  it is noise, and a log with smoother accelerations (sines) or more motion \
                  resolves it better",
-                crate::estimate::pipeline::M_PRECISION_GAIN_MAX,
+                est.m_precision_gain_max(),
                 100.0 * b
             ));
         }
