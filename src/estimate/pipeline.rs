@@ -318,11 +318,7 @@ impl EstimateRun {
     /// identification resolves: [`M_PRECISION_GAIN_MAX`], or 1 where the friction's sign is
     /// not resolved ([`UnresolvedFrictionSign`]).
     pub fn m_precision_gain_max(&self) -> f64 {
-        if self.unresolved_friction_sign.is_some() {
-            1.0
-        } else {
-            M_PRECISION_GAIN_MAX
-        }
+        m_precision_gain_max(self.unresolved_friction_sign.as_ref())
     }
 
     /// The filter's constants (k2, and M when it is estimated) whose two standard deviations
@@ -1503,11 +1499,7 @@ where
                 },
             )
         });
-        let m_gain_max = if unresolved_friction_sign.is_some() {
-            1.0
-        } else {
-            M_PRECISION_GAIN_MAX
-        };
+        let m_gain_max = m_precision_gain_max(unresolved_friction_sign.as_ref());
         widen_to_identification(&mut run, id, m_gain_max);
         let identified_s = id.samples as f64 * id.block_samples as f64 * dt;
         widen_offsets(&mut run, id, identified_s);
@@ -1915,6 +1907,17 @@ pub const M_RESOLVED: f64 = 0.1;
 /// +- 0.0037 against 0.5, identification 0.472 +- 0.033). The filter sees the same log, and
 /// where its own model of the force rate's noise is off it has no way to tell.
 pub const M_PRECISION_GAIN_MAX: f64 = 4.0;
+
+/// How many times more precisely than identification the filter may claim an M that
+/// identification resolves: [`M_PRECISION_GAIN_MAX`], or 1 where the friction's sign is not
+/// resolved ([`UnresolvedFrictionSign`]).
+fn m_precision_gain_max(unresolved: Option<&UnresolvedFrictionSign>) -> f64 {
+    if unresolved.is_some() {
+        1.0
+    } else {
+        M_PRECISION_GAIN_MAX
+    }
+}
 
 /// Brings the filter's standard deviations of M (where identification does not resolve it
 /// to [`M_RESOLVED`]) and d2 up to identification's, where they are below; such an M's also
