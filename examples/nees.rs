@@ -6,7 +6,8 @@
 //!
 //! Run: `cargo run --release --example nees [seeds] [m d0 d1 d2] [sines|steps|ramp-hold] [speed]`.
 //! The environment variables `Q_D`, `Q_XDD` and `Q_SIGMA` override the process noise of those
-//! states (tuning experiments), and `TWINS` the number of twins (0: the filter's raw constants).
+//! states (tuning experiments), `FORCE_RATE_S` the zero-phase force rate's window (s), and
+//! `TWINS` the number of twins (0: the filter's raw constants).
 //! `NEES_DEBUG` prints, per seed, the filter's d2 and M with the standard deviation it reports and
 //! its own (before it is held to its disagreement with identification), beside identification's,
 //! and k2 through the twins (the filter's own value, the twins' bias, scatter and excess scatter).
@@ -67,6 +68,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 if let Some(v) = std::env::var(name).ok().and_then(|v| v.parse().ok()) {
                     opts.q.push((state, v));
                 }
+            }
+            if let Some(w) = std::env::var("FORCE_RATE_S").ok().and_then(|v| v.parse().ok()) {
+                opts.force_rate = camspring::estimate::ekf::ForceRate::ZeroPhase { window_s: w };
             }
             if let Some(n) = std::env::var("TWINS").ok().and_then(|v| v.parse().ok()) {
                 opts.twins = n;

@@ -552,6 +552,7 @@ pub fn estimate_json(est: &EstimateRun) -> Value {
         })).collect::<Vec<_>>(),
         "recovery": est.recovery,
         "unresolved_friction_sign": est.unresolved_friction_sign,
+        "inertia_unidentified": est.inertia_unidentified,
         "twins": est.twins,
         "consistency": est.consistency,
         "settings": settings,
@@ -604,6 +605,14 @@ pub fn format_consistency(est: &EstimateRun) -> String {
              identification and the filter alike, and the filter's M shares identification's \
              error",
             u.d0_n, u.frictionless_force_std_n
+        );
+    }
+    if est.inertia_unidentified {
+        let _ = writeln!(
+            s,
+            "note: k2 is claimed no more precisely than identification's: identification left \
+             the inertia m out of its model, so the filter's model of the motion's dynamics, \
+             which its k2 leans on, is not checked against the log"
         );
     }
     if let Some(t) = &est.twins {
