@@ -192,10 +192,6 @@ pub struct EstimateRun {
     /// Where the friction's sign is not resolved ([`SignWindow`]) and M is therefore claimed
     /// no more precisely than identification's; None elsewhere.
     pub unresolved_friction_sign: Option<UnresolvedFrictionSign>,
-    /// Identification left the inertia m out of its model (not identifiable from the log), and
-    /// k2 is therefore claimed no more precisely than identification's
-    /// ([`K2_PRECISION_GAIN_MAX_WITHOUT_INERTIA`]).
-    pub inertia_unidentified: bool,
 }
 
 /// Coulomb friction whose sign the log does not resolve: d0 at least the noise of the force
@@ -323,6 +319,13 @@ impl EstimateRun {
     /// not resolved ([`UnresolvedFrictionSign`]).
     pub fn m_precision_gain_max(&self) -> f64 {
         m_precision_gain_max(self.unresolved_friction_sign.as_ref())
+    }
+
+    /// Whether identification left the inertia m out of its model (not identifiable from the
+    /// log), so that k2 is claimed no more precisely than identification's
+    /// ([`K2_PRECISION_GAIN_MAX_WITHOUT_INERTIA`]).
+    pub fn inertia_unidentified(&self) -> bool {
+        self.identification.as_ref().is_some_and(inertia_left_out)
     }
 
     /// The filter's constants (k2, and M when it is estimated) whose two standard deviations
@@ -1547,7 +1550,6 @@ where
     if let Some(id) = &identification {
         widen_to_disagreement(&mut run, id);
     }
-    let inertia_unidentified = identification.as_ref().is_some_and(inertia_left_out);
     Ok(EstimateRun {
         run,
         settings,
@@ -1561,7 +1563,6 @@ where
         std_before_disagreement,
         noise: resolved,
         unresolved_friction_sign,
-        inertia_unidentified,
     })
 }
 

@@ -552,7 +552,7 @@ pub fn estimate_json(est: &EstimateRun) -> Value {
         })).collect::<Vec<_>>(),
         "recovery": est.recovery,
         "unresolved_friction_sign": est.unresolved_friction_sign,
-        "inertia_unidentified": est.inertia_unidentified,
+        "inertia_unidentified": est.inertia_unidentified(),
         "twins": est.twins,
         "consistency": est.consistency,
         "settings": settings,
@@ -607,7 +607,7 @@ pub fn format_consistency(est: &EstimateRun) -> String {
             u.d0_n, u.frictionless_force_std_n
         );
     }
-    if est.inertia_unidentified {
+    if est.inertia_unidentified() {
         let _ = writeln!(
             s,
             "note: k2 is claimed no more precisely than identification's: identification left \
