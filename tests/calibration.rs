@@ -955,7 +955,7 @@ fn a_force_read_late_is_suspected_and_one_read_together_is_not() {
             // The screen's delay is within three of its standard deviations of the truth, and
             // it is suspected exactly where there is one.
             assert!(
-                (screen.delay_s - delay_s).abs() < 3.0 * screen.std_s,
+                (screen.held.delay_s - delay_s).abs() < 3.0 * screen.held.std_s,
                 "seed {seed}, {rows} rows: {screen:?}"
             );
             assert_eq!(

@@ -285,30 +285,63 @@ pub fn force_delay_line(d: &ForceDelayFit) -> String {
 }
 
 /// The line on what the screen for a force read late found, where no delay was asked for:
-/// a warning where one is suspected.
+/// a warning where one is suspected, and a note where the profile's least moved with the
+/// filter window (the model's misfit, not a delay).
 pub fn force_delay_screen_line(screen: &ForceDelayScreen) -> String {
-    let late = if screen.delay_s >= 0.0 {
+    let held = &screen.held;
+    let late = if held.delay_s >= 0.0 {
         "after"
     } else {
         "before"
     };
-    let at_least = if screen.beyond { "at least " } else { "" };
+    let at_least = if held.beyond { "at least " } else { "" };
+    if screen.moves_with_window() {
+        let longer = match &screen.longer_window {
+            Some(l) => format!(
+                "{:+.1} +- {:.1} ms at the {:.3} s window",
+                l.delay_s * 1e3,
+                l.std_s * 1e3,
+                l.window_s
+            ),
+            None => "no least at the next longer window".to_string(),
+        };
+        return format!(
+            "  force and position read together as far as the fit tells: the fit's chi-square \
+             is least with the force re-timed by {:+.1} +- {:.1} ms at the {:.3} s window, but \
+             {longer}; a delay in the log is the same through any filter, so this is the \
+             model's misfit trading with the delay (the filter rounding the motion's corners), \
+             not a delay\n",
+            held.delay_s * 1e3,
+            held.std_s * 1e3,
+            held.window_s
+        );
+    }
     if !screen.suspected {
         return format!(
             "  force and position read together as far as the fit tells (screened: {:+.1} +- \
              {:.1} ms)\n",
-            screen.delay_s * 1e3,
-            screen.std_s * 1e3
+            held.delay_s * 1e3,
+            held.std_s * 1e3
         );
     }
+    let confirmed = screen
+        .longer_window
+        .map(|l| {
+            format!(
+                ", and {:.1} ms at the {:.3} s window",
+                l.delay_s.abs() * 1e3,
+                l.window_s
+            )
+        })
+        .unwrap_or_default();
     format!(
         "  WARNING: the force looks read {at_least}{:.1} +- {:.1} ms {late} the position \
          ({:.1} standard deviations from none, by the fit's chi-square at the whole-sample \
-         delays near zero): a fit read as logged takes such a delay as inertia and damping. \
-         Give --force-delay auto to fit it and re-time the force.\n",
-        screen.delay_s.abs() * 1e3,
-        screen.std_s * 1e3,
-        screen.z.abs()
+         delays near zero{confirmed}): a fit read as logged takes such a delay as inertia and \
+         damping. Give --force-delay auto to fit it and re-time the force.\n",
+        held.delay_s.abs() * 1e3,
+        held.std_s * 1e3,
+        held.z.abs()
     )
 }
 

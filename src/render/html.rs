@@ -459,7 +459,12 @@ pub fn validation_html(
         v.range_max_mm,
         log = escape(log_name),
     );
-    if let Some(screen) = v.force_delay_screen.as_ref().filter(|s| s.suspected) {
+    if let Some(screen) = v
+        .force_delay_screen
+        .as_ref()
+        .filter(|s| s.suspected)
+        .map(|s| &s.held)
+    {
         let late = if screen.delay_s >= 0.0 {
             "after"
         } else {

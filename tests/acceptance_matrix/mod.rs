@@ -302,7 +302,10 @@ pub fn run_case(case: &Case) -> Outcome {
         }
     };
     let id = run.identification.as_ref().expect("identified");
-    outcome.delay_screen = run.force_delay_screen.as_ref().map(|s| (s.z, s.suspected));
+    outcome.delay_screen = run
+        .force_delay_screen
+        .as_ref()
+        .map(|s| (s.held.z, s.suspected));
     outcome.ekf_recovered = run.recovery.is_some();
     outcome.ekf_imprecise = !run.imprecise().is_empty();
     if !run.consistency.consistent {
