@@ -49,8 +49,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 (None, true) => " | longer window: no least".to_string(),
                 (None, false) => String::new(),
             };
+            let spread = match s.window_spread_s {
+                Some(w) => format!(
+                    " | spread {:.1} ms, z with it {:+.1}",
+                    w * 1e3,
+                    s.held.delay_s / s.std_with_window_s()
+                ),
+                None => String::new(),
+            };
             println!(
-                "{path}: {}{longer} | suspected {}, moves with the window {}",
+                "{path}: {}{longer}{spread} | suspected {}, moves with the window {}",
                 at(&s.held),
                 s.suspected,
                 s.moves_with_window()

@@ -419,8 +419,13 @@ pub struct ForceDelayScreen {
     /// taken where the delay at the held window is `significant` (None elsewhere, or where
     /// that profile does not curve upward).
     pub longer_window: Option<ScreenedDelay>,
-    /// Whether the delay is significant, with the same sign, at both windows: the log looks
-    /// read with its force late (or early), and `--force-delay auto` should be given.
+    /// Half the difference (s) between the two windows' delays, where the longer one was
+    /// taken: the filter's share of the delay, which a delay in the log does not have.
+    pub window_spread_s: Option<f64>,
+    /// Whether the delay is significant, with the same sign, at both windows, and beyond
+    /// [`SCREEN_Z`] times the held window's standard deviation and `window_spread_s` in
+    /// quadrature: the log looks read with its force late (or early), and
+    /// `--force-delay auto` should be given.
     pub suspected: bool,
 }
 
@@ -430,6 +435,12 @@ impl ForceDelayScreen {
     /// not do.
     pub fn moves_with_window(&self) -> bool {
         self.held.significant && !self.suspected
+    }
+
+    /// The held window's delay's standard deviation (s) with the two windows' spread in
+    /// quadrature (the held window's alone where the longer one was not taken).
+    pub fn std_with_window_s(&self) -> f64 {
+        self.held.std_s.hypot(self.window_spread_s.unwrap_or(0.0))
     }
 }
 
@@ -473,10 +484,11 @@ pub const SCREEN_Z: f64 = 3.0;
 ///    the log is a re-pairing of its readings, the same through any filter; a least that the
 ///    model's misfit puts there moves with the filter, because the misfit is the filter's
 ///    rounding of the motion's corners. A delay is suspected only where both windows find it
-///    significant, with the same sign. (On the independent rig's servo logs, whose velocity
+///    significant, with the same sign, and where it is beyond [`SCREEN_Z`] times the held
+///    window's standard deviation and half the two windows' difference in quadrature. (On the independent rig's servo logs, whose velocity
 ///    steps the filter rounds, the held window alone warned on 18 of 116 read together,
-///    both windows on 6; on its other profiles read 10 to 30 ms late, the longer window
-///    confirmed all 27 the held one warned on.)
+///    both windows on 6, and with their spread on 2; on its other profiles read 10 to 30 ms
+///    late, all 27 the held window warned on are still warned.)
 ///
 /// Seven identifications where the log shows no delay, at most 42. None where the log is too
 /// short for [`fit_force_delay`], or the profile at `id`'s window does not curve upward.
@@ -493,12 +505,15 @@ pub fn screen_force_delay(
     } else {
         None
     };
+    let window_spread_s = longer_window.map(|l| 0.5 * (l.delay_s - held.delay_s).abs());
     let suspected = held.significant
         && longer_window
-            .is_some_and(|l| l.significant && l.delay_s.signum() == held.delay_s.signum());
+            .is_some_and(|l| l.significant && l.delay_s.signum() == held.delay_s.signum())
+        && window_spread_s.is_some_and(|w| held.delay_s.abs() > SCREEN_Z * held.std_s.hypot(w));
     Some(ForceDelayScreen {
         held,
         longer_window,
+        window_spread_s,
         suspected,
     })
 }

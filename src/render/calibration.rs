@@ -328,7 +328,8 @@ pub fn force_delay_screen_line(screen: &ForceDelayScreen) -> String {
         .longer_window
         .map(|l| {
             format!(
-                ", and {:.1} ms at the {:.3} s window",
+                ", and {:.1} ms at the {:.3} s window; the standard deviation counts half their \
+                 difference",
                 l.delay_s.abs() * 1e3,
                 l.window_s
             )
@@ -340,8 +341,8 @@ pub fn force_delay_screen_line(screen: &ForceDelayScreen) -> String {
          delays near zero{confirmed}): a fit read as logged takes such a delay as inertia and \
          damping. Give --force-delay auto to fit it and re-time the force.\n",
         held.delay_s.abs() * 1e3,
-        held.std_s * 1e3,
-        held.z.abs()
+        screen.std_with_window_s() * 1e3,
+        held.delay_s.abs() / screen.std_with_window_s()
     )
 }
 

@@ -459,26 +459,23 @@ pub fn validation_html(
         v.range_max_mm,
         log = escape(log_name),
     );
-    if let Some(screen) = v
-        .force_delay_screen
-        .as_ref()
-        .filter(|s| s.suspected)
-        .map(|s| &s.held)
-    {
-        let late = if screen.delay_s >= 0.0 {
+    if let Some(screen) = v.force_delay_screen.as_ref().filter(|s| s.suspected) {
+        let held = &screen.held;
+        let late = if held.delay_s >= 0.0 {
             "after"
         } else {
             "before"
         };
+        let std = screen.std_with_window_s();
         let _ = writeln!(
             h,
             "<p><span class=\"warn\">Warning</span> The force looks read {:.1} &plusmn; {:.1} ms \
-             {late} the position ({:.1} standard deviations from none): a fit read as logged \
-             takes such a delay as inertia and damping. Run again with \
+             {late} the position ({:.1} standard deviations from none, at two filter windows): \
+             a fit read as logged takes such a delay as inertia and damping. Run again with \
              <code>--force-delay auto</code> to fit it and re-time the force.</p>",
-            screen.delay_s.abs() * 1e3,
-            screen.std_s * 1e3,
-            screen.z.abs()
+            held.delay_s.abs() * 1e3,
+            std * 1e3,
+            held.delay_s.abs() / std
         );
     }
     h.push_str(

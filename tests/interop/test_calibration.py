@@ -1093,16 +1093,18 @@ def test_a_log_read_together_is_not_suspected_of_a_force_delay(tmp_path, seed):
     assert "read together as far as the fit tells" in text and "WARNING: the force" not in text, text
 
 
-@pytest.mark.parametrize("i", [264, 379])
+@pytest.mark.parametrize("i", [224, 264, 379])
 def test_a_delay_that_moves_with_the_filter_window_is_not_warned(tmp_path, i):
-    """Sweep draws 264 (m 0.36, d1 1.84, d0 0.70 N, 200 Hz) and 379 (m 0.043, d1 0.29, d2
-    -0.068, 1 kHz): servo ramp-holds read with force and position together. The filter rounds
-    the velocity steps and the model's misfit there trades with a delay: at identification's
-    window the screen's profile was least at -34.6 ms (z -6.2) and +24.5 ms (z +4.6), and it warned that
-    the force looked read early or late. A delay in the log is the same through any filter;
-    at the next longer window these are +1.8 ms (z +0.5) and +5.0 ms (z +1.3). Not suspected
-    now, and where the held window's least is significant the text says it moved with the
-    window."""
+    """Sweep draws 224 (m 0.013, d1 0.43, d0 3.73 N, 500 Hz), 264 (m 0.36, d1 1.84, d0 0.70 N,
+    200 Hz) and 379 (m 0.043, d1 0.29, d2 -0.068, 1 kHz): servo ramp-holds read with force and
+    position together. The filter rounds the velocity steps and the model's misfit there
+    trades with a delay: at identification's window the screen's profile was least at
+    -34.7 ms (z -5.5), -34.6 ms (z -6.2) and +24.5 ms (z +4.6), and it warned that the force
+    looked read early or late. A delay in the log is the same through any filter; at the next
+    longer window these are -60.3 ms (z -10.2: significant too, but 25.6 ms away, so with half
+    that difference in the standard deviation the held window's z is -2.4), +1.8 ms (z +0.5)
+    and +5.0 ms (z +1.3). Not suspected now, and where the held window's least is
+    significant the text says it moved with the window."""
     _, log = sweep_log(tmp_path, i)
     screen = json.loads(camspring("identify", log, "--json").stdout)["force_delay_screen"]
     assert not screen["suspected"], screen
@@ -1126,6 +1128,8 @@ def test_a_servo_log_read_late_is_still_warned(tmp_path):
     assert screen["suspected"] and abs(screen["delay_s"] - 0.020) < 3.0 * screen["std_s"], screen
     longer = screen["longer_window"]
     assert abs(longer["delay_s"] - 0.020) < 3.0 * longer["std_s"], longer
+    # The two windows agree: the spread they add to the standard deviation is small.
+    assert screen["window_spread_s"] < screen["std_s"], screen
 
 
 @pytest.mark.parametrize("seed", [1, 2])
