@@ -76,6 +76,10 @@ pub struct ForceDelayFit {
     pub fitted: bool,
     /// The filter window (s) the profile held fixed, where fitted.
     pub window_s: Option<f64>,
+    /// Half the difference (s) between the delays the profile finds at the held window and
+    /// at the next longer one, where fitted and that profile curves upward: the filter's
+    /// share, included in `std_s` in quadrature.
+    pub window_spread_s: Option<f64>,
     /// The delays the profile tried, in the order tried.
     pub trials: Vec<DelayTrial>,
     /// What the delay's standard deviation adds to each identified parameter's, already
@@ -92,6 +96,7 @@ impl ForceDelayFit {
             std_s: None,
             fitted: false,
             window_s: None,
+            window_spread_s: None,
             trials: Vec::new(),
             parameter_std: Default::default(),
         }
@@ -333,8 +338,11 @@ fn profile_extent(window_s: f64, dt: f64) -> (i64, f64) {
 ///    interpolated ones had its least chi-square half a row off).
 /// 5. The standard deviation: the profile's, where the total chi-square rises by the fit's
 ///    reduced chi-square (at least 1), its variance scaled by [`correlation_inflation`]; the
-///    vertex's own from the points' scatter about the parabola; and [`ROW_RESOLUTION`] of a
-///    row, all in quadrature. One beyond [`UNDETERMINED_STD_S`] is an error too.
+///    vertex's own from the points' scatter about the parabola; [`ROW_RESOLUTION`] of a
+///    row; and half the difference from the delay the same profile finds at the next longer
+///    window (a delay in the log is the same through any filter, a least the model's misfit
+///    puts there moves with it: [`screen_force_delay`]), all in quadrature. One beyond
+///    [`UNDETERMINED_STD_S`] is an error too.
 /// 6. The profile is taken over the first [`PROFILE_ROWS`] rows (the delay is the rig's), so
 ///    that its identifications are bounded on a day-long log. A log shorter than
 ///    [`MIN_PROFILE_WINDOWS`] windows or [`MIN_PROFILE_SEARCHES`] times the rows searched
@@ -395,6 +403,8 @@ pub fn fit_force_delay(
         .latest(best)
         .and_then(|at| vertex_std_rows(&fit, at))
         .ok_or(undetermined)?;
+    let spread_rows = window_spread_rows(reduced, noise, window, best, rows, limit);
+    let std_rows = std_rows.hypot(spread_rows.unwrap_or(0.0));
     if std_rows * dt > UNDETERMINED_STD_S {
         return Err(IdentifyError::ForceDelayUndetermined { window_s: window });
     }
@@ -403,9 +413,29 @@ pub fn fit_force_delay(
         std_s: Some(std_rows * dt),
         fitted: true,
         window_s: Some(window),
+        window_spread_s: spread_rows.map(|r| r * dt),
         trials: profile.trials(),
         parameter_std: Default::default(),
     })
+}
+
+/// Half the difference (rows) between the delay `rows` found at `window` around the row
+/// `best` and the one the same profile finds at the next longer window ([`WINDOW_RATIO`]
+/// times it): the filter's share of the delay, which a delay in the log does not have. None
+/// where the longer window's profile does not curve upward.
+fn window_spread_rows(
+    reduced: &ReducedLog,
+    noise: &SensorNoise,
+    window: f64,
+    best: i64,
+    rows: f64,
+    limit: i64,
+) -> Option<f64> {
+    let mut longer = DelayProfile::new(reduced, noise, window * WINDOW_RATIO);
+    let (b, _) = longer.scan((best - LOCAL_ROWS..=best + LOCAL_ROWS).collect());
+    let (b, fit) = longer.vertex(b, limit)?;
+    let at = b as f64 + fit.vertex.clamp(-(LOCAL_ROWS as f64), LOCAL_ROWS as f64);
+    Some(0.5 * (at - rows).abs())
 }
 
 /// What identification's profile says about a force delay where none was asked for

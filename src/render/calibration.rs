@@ -266,11 +266,17 @@ pub fn force_delay_line(d: &ForceDelayFit) -> String {
     match (d.fitted, d.std_s) {
         (true, Some(std)) => format!(
             "  force re-timed: read {:.2} +- {:.2} ms {late} the position (fitted over {} \
-             delays, window held at {:.3} s)\n",
+             delays, window held at {:.3} s{})\n",
             d.delay_s.abs() * 1e3,
             std * 1e3,
             d.trials.len(),
-            d.window_s.unwrap_or(f64::NAN)
+            d.window_s.unwrap_or(f64::NAN),
+            d.window_spread_s
+                .map(|w| format!(
+                    "; the +- counts {:.2} ms, half the move to the next longer window's",
+                    w * 1e3
+                ))
+                .unwrap_or_default()
         ),
         (true, None) => format!(
             "  force re-timed: read {:.2} ms {late} the position (fitted; the profile has no \

@@ -1076,7 +1076,7 @@ def test_a_force_read_late_is_fitted_and_re_timed(tmp_path, seed):
     # The delay's uncertainty is carried into m's and d1's standard deviations.
     assert d["parameter_std"]["m_n_s2_per_mm"] > 0 and d["parameter_std"]["d1_n_s_per_mm"] > 0, d
     given = json.loads(camspring("identify", log, "--json", "--force-delay", "15ms").stdout)
-    assert given["force_delay"] == {"delay_s": 0.015, "std_s": None, "fitted": False, "window_s": None, "trials": [], "parameter_std": {}}
+    assert given["force_delay"] == {"delay_s": 0.015, "std_s": None, "fitted": False, "window_s": None, "window_spread_s": None, "trials": [], "parameter_std": {}}
     for key, value in truth:
         assert abs(z(given["parameters"], key, value)) < 3.0, (key, given["parameters"])
 
@@ -1112,6 +1112,25 @@ def test_a_delay_that_moves_with_the_filter_window_is_not_warned(tmp_path, i):
     assert "WARNING: the force" not in text, text
     if screen["significant"]:
         assert "misfit trading with the delay" in text, text
+
+
+@pytest.mark.parametrize("i", [379, 704])
+def test_auto_counts_the_filters_share_of_the_delay(tmp_path, i):
+    """Sweep draws 379 and 704, lag-free servo ramp-holds (1 kHz and 200 Hz). `--force-delay
+    auto` fitted a delay that is not in the log: +24.5 +- 5.4 ms (z +4.6) and -20.7 +- 6.7 ms
+    (z -3.1). The same profile at the next longer window puts it at +5.0 and -70.0 ms; half
+    that difference is the filter's share, which a delay in the log does not have, and is now
+    in the delay's standard deviation (11.1 and 25.5 ms): the delay is within three of it of
+    none, and so is d1."""
+    tr, log = sweep_log(tmp_path, i)
+    r = camspring("identify", log, "--json", "--force-delay", "auto")
+    assert r.returncode in (0, 1), r.stderr
+    j = json.loads(r.stdout)
+    d = j["force_delay"]
+    assert d["window_spread_s"] is not None and d["window_spread_s"] > 0.005, d
+    assert abs(d["delay_s"]) < 3.0 * d["std_s"], d
+    p = j["parameters"]
+    assert abs(p["d1_n_s_per_mm"] - tr.d1) < 3.0 * p["d1_n_s_per_mm_std"], p
 
 
 def test_a_servo_log_read_late_is_still_warned(tmp_path):
