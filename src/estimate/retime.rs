@@ -287,6 +287,16 @@ impl<'a> DelayProfile<'a> {
         vertex
     }
 
+    /// The least near the row `centre`: the rows within [`LOCAL_ROWS`] of it tried, then the
+    /// parabola around the best of them ([`DelayProfile::vertex`]). The row it is centred on,
+    /// the parabola, and the least (rows, held within [`LOCAL_ROWS`] of that row).
+    fn least_near(&mut self, centre: i64, limit: i64) -> Option<(i64, Parabola, f64)> {
+        let (best, _) = self.scan((centre - LOCAL_ROWS..=centre + LOCAL_ROWS).collect());
+        let (best, fit) = self.vertex(best, limit)?;
+        let rows = best as f64 + fit.vertex.clamp(-(LOCAL_ROWS as f64), LOCAL_ROWS as f64);
+        Some((best, fit, rows))
+    }
+
     /// The delays tried, in order of delay.
     fn trials(&self) -> Vec<DelayTrial> {
         let mut trials: Vec<DelayTrial> = self
@@ -431,10 +441,8 @@ fn window_spread_rows(
     rows: f64,
     limit: i64,
 ) -> Option<f64> {
-    let mut longer = DelayProfile::new(reduced, noise, window * WINDOW_RATIO);
-    let (b, _) = longer.scan((best - LOCAL_ROWS..=best + LOCAL_ROWS).collect());
-    let (b, fit) = longer.vertex(b, limit)?;
-    let at = b as f64 + fit.vertex.clamp(-(LOCAL_ROWS as f64), LOCAL_ROWS as f64);
+    let (_, _, at) =
+        DelayProfile::new(reduced, noise, window * WINDOW_RATIO).least_near(best, limit)?;
     Some(0.5 * (at - rows).abs())
 }
 
@@ -515,10 +523,11 @@ pub const SCREEN_Z: f64 = 3.0;
 ///    model's misfit puts there moves with the filter, because the misfit is the filter's
 ///    rounding of the motion's corners. A delay is suspected only where both windows find it
 ///    significant, with the same sign, and where it is beyond [`SCREEN_Z`] times the held
-///    window's standard deviation and half the two windows' difference in quadrature. (On the independent rig's servo logs, whose velocity
-///    steps the filter rounds, the held window alone warned on 18 of 116 read together,
-///    both windows on 6, and with their spread on 2; on its other profiles read 10 to 30 ms
-///    late, all 27 the held window warned on are still warned.)
+///    window's standard deviation and half the two windows' difference in quadrature. (On
+///    the independent rig's servo logs, whose velocity steps the filter rounds, the held
+///    window alone warned on 18 of 116 read together, both windows on 6, and with their
+///    spread on 2; on its other profiles read 10 to 30 ms late, all 27 the held window
+///    warned on are still warned.)
 ///
 /// Seven identifications where the log shows no delay, at most 42. None where the log is too
 /// short for [`fit_force_delay`], or the profile at `id`'s window does not curve upward.
@@ -535,17 +544,16 @@ pub fn screen_force_delay(
     } else {
         None
     };
-    let window_spread_s = longer_window.map(|l| 0.5 * (l.delay_s - held.delay_s).abs());
-    let suspected = held.significant
-        && longer_window
-            .is_some_and(|l| l.significant && l.delay_s.signum() == held.delay_s.signum())
-        && window_spread_s.is_some_and(|w| held.delay_s.abs() > SCREEN_Z * held.std_s.hypot(w));
-    Some(ForceDelayScreen {
+    let mut screen = ForceDelayScreen {
         held,
         longer_window,
-        window_spread_s,
-        suspected,
-    })
+        window_spread_s: longer_window.map(|l| 0.5 * (l.delay_s - held.delay_s).abs()),
+        suspected: false,
+    };
+    screen.suspected = longer_window
+        .is_some_and(|l| l.significant && l.delay_s.signum() == held.delay_s.signum())
+        && held.delay_s.abs() > SCREEN_Z * screen.std_with_window_s();
+    Some(screen)
 }
 
 /// The least of the delay profile at `window` ([`screen_force_delay`], step 1).
@@ -556,11 +564,9 @@ fn screen_at(reduced: &ReducedLog, noise: &SensorNoise, window: f64) -> Option<S
         return None;
     }
     let mut profile = DelayProfile::new(reduced, noise, window);
-    let (best, _) = profile.scan((-LOCAL_ROWS..=LOCAL_ROWS).collect());
-    let (best, fit) = profile.vertex(best, limit)?;
+    let (best, fit, rows) = profile.least_near(0, limit)?;
     let std_rows = vertex_std_rows(&fit, profile.latest(best)?)?;
     let beyond = fit.vertex.abs() > LOCAL_ROWS as f64;
-    let rows = best as f64 + fit.vertex.clamp(-(LOCAL_ROWS as f64), LOCAL_ROWS as f64);
     let z = rows / std_rows;
     Some(ScreenedDelay {
         delay_s: rows * dt,
