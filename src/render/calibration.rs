@@ -636,15 +636,21 @@ pub fn format_consistency(est: &EstimateRun) -> String {
     if let Some(r) = &est.recovery {
         let _ = writeln!(s, "note: {r}");
     }
-    if let (Some(u), true) = (&est.unresolved_friction_sign, est.settings.reports(idx::M)) {
+    if let Some(u) = &est.unresolved_friction_sign {
         let _ = writeln!(
             s,
-            "note: M is claimed no more precisely than identification's: the friction d0 = \
-             {:.3} N is within four standard deviations of the force the frictionless model \
-             leaves ({:.3} N), so its sign at starts and stops is read wrong at times, by \
-             identification and the filter alike, and the filter's M shares identification's \
-             error",
-            u.d0_n, u.frictionless_force_std_n
+            "note: the friction d0 = {:.3} N is within four standard deviations of the force \
+             the frictionless model leaves ({:.3} N), so its sign at starts and stops is read \
+             wrong at times, by identification and the filter alike: {}k2 and d2 carry their \
+             whole difference from identification's in their standard deviations",
+            u.d0_n,
+            u.frictionless_force_std_n,
+            if est.settings.reports(idx::M) {
+                "M is claimed no more precisely than identification's (the filter's M shares \
+                 its error), and "
+            } else {
+                ""
+            }
         );
     }
     if est.inertia_unidentified() {
