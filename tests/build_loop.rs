@@ -202,6 +202,77 @@ fn diagnose_recovers_the_parts_of_builds_off_the_design() {
 }
 
 #[test]
+fn samples_beyond_the_stroke_are_left_out_of_the_diagnosis() {
+    // A rod that leaves the stroke (a rig with no stop): after the log, a slow half-cosine out
+    // to 20 mm past the stroke's end and back, 120 s (a third of the log; with those samples
+    // fitted, the spring rate or preload came out beyond its limit). On the stroke the force is the build's
+    // (loading out, unloading back, with the light transmission's damper); past its margin the
+    // rod rests against something that holds the force at the end's value, which the design's
+    // forward model (its pitch curve carried on straight) does not describe. The diagnosis
+    // must find the same build as on the log without the excursion.
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+    let d = default_design();
+    let truth = parts(1.1, 0.3, 0.03, 0.0);
+    let spring = built_spring(&d, &truth).unwrap();
+    let clean = log_of(&d, &truth, Dynamics::light(), Profile::Sines, 0);
+    let xmax = d.xmax_mm();
+    let dynamics = Dynamics::light();
+    let mut log = clean.clone();
+    let dt = clean.dt_s();
+    let (t0, x0) = (
+        *clean.t_s.last().unwrap(),
+        *clean.position_mm.last().unwrap(),
+    );
+    let reach = xmax + 20.0 - x0;
+    let duration = 120.0;
+    let noise = SensorNoise::default();
+    let mut rng = rand::rngs::StdRng::seed_from_u64(11);
+    let f_noise = Normal::new(0.0, noise.force_variance_n2.sqrt()).unwrap();
+    let x_noise = Normal::new(0.0, noise.position_variance_mm2.sqrt()).unwrap();
+    let w = std::f64::consts::TAU / duration;
+    let samples = (duration / dt) as usize;
+    let beyond_margin = |x: f64| x > 1.1 * xmax;
+    let mut beyond = 0;
+    for i in 1..=samples {
+        let t = i as f64 * dt;
+        // x = x0 + reach (1 - cos w t) / 2.
+        let x = x0 + 0.5 * reach * (1.0 - (w * t).cos());
+        let v = 0.5 * reach * w * (w * t).sin();
+        let a = 0.5 * reach * w * w * (w * t).cos();
+        let spring_force = if beyond_margin(x) {
+            beyond += 1;
+            spring.loading.force_n(xmax)
+        } else if v >= 0.0 {
+            spring.loading.force_n(x)
+        } else {
+            spring.unloading.force_n(x)
+        };
+        let force = spring_force
+            + dynamics.m_n_s2_per_mm * a
+            + dynamics.d1_n_s_per_mm * v
+            + dynamics.d2_n_s3_per_mm3 * v * v * v;
+        log.t_s.push(t0 + t);
+        log.force_n.push(force + f_noise.sample(&mut rng));
+        log.position_mm.push(x + x_noise.sample(&mut rng));
+    }
+    assert!(beyond > 500, "{beyond} samples beyond the margin");
+    let g = diagnosed(&d, &log, PositionOffset::Mm(0.0));
+    // The samples beyond the margin are left out (the smoothed positions near its edge may
+    // fall either side), and none of the log without the excursion is.
+    let left_out = g.outside_stroke_samples as f64;
+    assert!(
+        (left_out / beyond as f64 - 1.0).abs() < 0.05,
+        "{left_out} left out against {beyond} beyond the margin"
+    );
+    assert_eq!(
+        diagnosed(&d, &clean, PositionOffset::Mm(0.0)).outside_stroke_samples,
+        0
+    );
+    assert_recovers(&g, &truth, "log with an excursion past the stroke");
+}
+
+#[test]
 fn with_the_zero_unknown_the_rate_is_recovered_or_named() {
     // On an exponential law a shift of the zero scales the force much as the spring rate
     // does; the log separates them only through the law's constant term and the preload.

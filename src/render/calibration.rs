@@ -1339,6 +1339,14 @@ pub fn format_diagnosis(d: &crate::verdict::diagnose::Diagnosis) -> String {
         d.windows_tried.len(),
         d.reduced_chi2
     );
+    if d.outside_stroke_samples > 0 {
+        let _ = writeln!(
+            s,
+            "  {} samples beyond the designed stroke left out: the design's forward model does \
+             not reach them",
+            d.outside_stroke_samples
+        );
+    }
     s
 }
 

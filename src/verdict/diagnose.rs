@@ -315,6 +315,9 @@ pub struct Diagnosis {
     /// [`crate::estimate::identify::REVERSAL_TRAVEL_SHARE`] the log moves one way only, and
     /// the friction outside the cam cannot be told from the spring's force on that stroke.
     pub reversal_travel_share: f64,
+    /// Samples left out because their position lies beyond the designed stroke by more than
+    /// its margin ([`STROKE_MARGIN`]): the design's forward model does not reach them.
+    pub outside_stroke_samples: usize,
     /// The force channel's delay the force was re-timed by before the diagnosis, if any (set
     /// by the caller that re-timed it).
     pub force_delay: Option<crate::estimate::retime::ForceDelayFit>,
@@ -420,6 +423,7 @@ impl Diagnosis {
             sg_window_s: 0.5,
             windows_tried: Vec::new(),
             reversal_travel_share: 1.0,
+            outside_stroke_samples: 0,
         }
     }
 }
@@ -1176,6 +1180,8 @@ struct WindowFit {
     /// compares (leaving samples out lowers it by itself, and a long window that distorts the
     /// motion's corners would look best).
     reduced_chi2_with_transients: f64,
+    /// Samples beyond the designed stroke, left out ([`outside_stroke`]).
+    outside_stroke: usize,
 }
 
 /// Smooths the log over `window` samples and fits.
@@ -1201,7 +1207,14 @@ fn fit_at_window(
         )));
     }
     let forces = &log.force_n[diff.half..diff.half + n];
-    let mut excluded = vec![false; n];
+    // The design's forward model holds on the cam's stroke only: beyond it the made cam has no
+    // profile (the pitch curve is carried on straight), and a real rod meets its stops. A log
+    // whose rod travels far past the stroke (an independent rig's force-controlled heavy rod
+    // without stops, draw 1073: 43 % of its samples from -74 to 0 and 15 to 27 mm of a 15 mm
+    // stroke) was fitted there against that straight extension, m came out at a fifth of the
+    // truth, and the true law failed force_rms at 69.5 %. Those samples are left out.
+    let mut excluded = outside_stroke(design, &motion.x, start[3], free[3]);
+    let outside = excluded.iter().filter(|&&e| e).count();
     let noise_hides = || {
         DiagnoseError::Log(format!(
             "at a window of {:.3} s the smoothed velocity's and acceleration's noise outweighs \
@@ -1319,7 +1332,27 @@ fn fit_at_window(
         window_s: diff.window() as f64 * dt,
         signal_share,
         reduced_chi2_with_transients,
+        outside_stroke: outside,
     })
+}
+
+/// How far past either end of the designed stroke a sample is still fitted, as a share of
+/// the stroke: a zero a little off, or a rod that overshoots its end, stays in the fit.
+pub const STROKE_MARGIN: f64 = 0.1;
+
+/// Which of the smoothed positions `x` lie beyond the designed stroke by more than its
+/// margin ([`STROKE_MARGIN`]), with the encoder zero at `zero_mm`. None where the zero is
+/// fitted (`zero_free`): the samples are chosen before it is known, and an encoder read
+/// reversed is zeroed at the stroke's other end, a whole stroke from where it is logged.
+fn outside_stroke(design: &Design, x: &[f64], zero_mm: f64, zero_free: bool) -> Vec<bool> {
+    let xmax = design.xmax_mm();
+    let margin = xmax * STROKE_MARGIN;
+    x.iter()
+        .map(|&x| {
+            let d = x - zero_mm;
+            !zero_free && !(-margin..=xmax + margin).contains(&d)
+        })
+        .collect()
 }
 
 /// 1.4826 times the median absolute deviation from the median (the standard deviation of
@@ -1499,6 +1532,7 @@ pub fn diagnose(
         fit,
         samples: s,
         window_s,
+        outside_stroke,
         ..
     }) = best
     else {
@@ -1563,6 +1597,7 @@ pub fn diagnose(
         bins: Vec::new(),
         sg_window_s: window_s,
         windows_tried: candidates,
+        outside_stroke_samples: outside_stroke,
         // The moving samples' velocities, each signed as its friction is.
         reversal_travel_share: crate::estimate::identify::reversal_travel_share(
             s.xd.iter()

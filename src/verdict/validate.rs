@@ -740,6 +740,16 @@ pub fn coverage(
             100.0 * TOP_FORCE_SHARE
         ));
     }
+    let margin = crate::verdict::diagnose::STROKE_MARGIN * xmax_mm;
+    if lo < -margin || hi > xmax_mm + margin {
+        warnings.push(format!(
+            "the log's positions reach x = {lo:.2} ... {hi:.2} mm, beyond the designed stroke \
+             0 ... {xmax_mm:.2} mm by more than {:.0} % of it: the built part's rod cannot \
+             travel there (check the encoder's zero, sign and unit: --position-offset, \
+             --position), and the force curve is judged on the stroke alone",
+            100.0 * crate::verdict::diagnose::STROKE_MARGIN
+        ));
+    }
     let uncovered = 100.0 * (1.0 - fraction);
     let short = fraction < MIN_STROKE_COVERED;
     if short {

@@ -911,6 +911,19 @@ def test_a_bins_standard_error_holds_the_uncertainty_of_the_dynamics_taken_out(t
     assert rc == 1 and not wrong["pass"], wrong["criteria"]
 
 
+def test_a_rod_that_travels_far_past_the_stroke_is_judged_on_the_stroke(tmp_path):
+    """Sweep draw 1073: a force-controlled heavy rod with almost no damping (m 0.45, d1 0.05,
+    1 kHz) swings from -74 to +27 mm on a 15 mm stroke (the rig has no stops), 43 % of its
+    samples off the stroke. The diagnosis fitted those samples against the design's forward
+    model carried on straight past the cam's ends: m came out at a fifth of the truth and the
+    true law failed force_rms at 69.5 %. Samples beyond the stroke (by more than a tenth of
+    it) are now left out of the diagnosis and counted, the coverage warns of the travel past
+    the stroke, the true law passes and k2 5 % high fails."""
+    right = passes_the_true_law_and_fails_k2_5_percent_high(tmp_path, 1073)
+    assert right["diagnosis"]["outside_stroke_samples"] > 50_000, right["diagnosis"]["outside_stroke_samples"]
+    assert any("beyond the designed stroke" in w for w in right["coverage"]["warnings"]), right["coverage"]
+
+
 @pytest.mark.parametrize("i", [84, 86])
 def test_validate_passes_the_true_law_on_sweep_draws_84_and_86(tmp_path, i):
     """Sweep draws 84 (a servo's ramp-holds of a light damper with a strong cube: m 0.21,
