@@ -1932,28 +1932,29 @@ fn fit_regression(
             p[D0] = 0.0;
             not_identifiable.push(PARAMS[D0].to_string());
         }
-        // A second start where the profile over k2 on the moving samples has a point that fits
-        // clearly better than the quasi-static start: the fit from each, and the one that ends
-        // clearly lower is kept (the quasi-static one where neither does). The quasi-static
-        // samples of a rod with friction carry +-d0 at rest: on the independent rig's sweep
-        // draw 1083 (force control, d0 1.59 N, a spring whose force spans 12.5 to 19 N) they
-        // put k2 at 0.006 against 0.134. There mu e^(k2 x) is nearly mu (1 + k2 x), a column
-        // that F0 repeats, and the fit with k2 fixed gave F0 up as not identifiable; k2 then
-        // ended 72 % low, 59 of its standard deviations, with nothing said. (Taken as the only
-        // start, the profile's point moved fits that were right: a servo's transients, still
-        // in the samples, can make a wrong k2 fit the direct rows better.)
-        let direct = all.subset(&moving, true);
-        let profile_k2 = {
-            let w = weights_at(&p, &direct);
-            let c_fixed = correction(&direct, &active, &w);
+        // A second start where the fit from the quasi-static start gave the spring's offset or
+        // scale up (F0 or mu) and the profile over k2 on the moving samples has a point that
+        // fits clearly better than that start: the fit from each, and the one that ends
+        // clearly lower is kept. The quasi-static samples of a rod with friction carry +-d0 at
+        // rest: on the independent rig's sweep draw 1083 (force control, d0 1.59 N, a spring
+        // whose force spans 12.5 to 19 N) they put k2 at 0.006 against 0.134. There
+        // mu e^(k2 x) is nearly mu (1 + k2 x), a column that F0 repeats, and the fit with k2
+        // fixed gave F0 up as not identifiable; k2 then ended 72 % low, 59 of its standard
+        // deviations, with nothing said. (Taken as the only start, the profile's point moved
+        // fits that were right: a servo's transients, still in the samples, can make a wrong
+        // k2 fit the direct rows better. Tried on every fit, the second start doubled the time
+        // of many.)
+        let profile_k2 = |direct: &Rows| {
+            let w = weights_at(&p, direct);
+            let c_fixed = correction(direct, &active, &w);
             let at_start = {
-                let (jtj, jtr, _) = normal_with(&p, &direct, &active, &w, &c_fixed);
+                let (jtj, jtr, _) = normal_with(&p, direct, &active, &w, &c_fixed);
                 solve(&jtj, &jtr, &active)
-                    .map(|dq| objective(&(p + dq), &direct, &w, &c_fixed))
+                    .map(|dq| objective(&(p + dq), direct, &w, &c_fixed))
                     .filter(|c| c.is_finite())
                     .unwrap_or(f64::INFINITY)
             };
-            k2_profile(&p, &direct, &active, &w, &c_fixed)
+            k2_profile(&p, direct, &active, &w, &c_fixed)
                 .filter(|(c, _)| *c < at_start - PROFILE_MARGIN)
                 .map(|(_, q)| q[K2])
         };
@@ -2029,7 +2030,11 @@ fn fit_regression(
             Ok((rows, p, active, not_identifiable, paper_covariance_k2_fixed))
         };
         let first = from(p, active, not_identifiable.clone());
-        let Some(k2) = profile_k2 else {
+        if first.as_ref().is_ok_and(|f| f.2[F0] && f.2[MU]) {
+            return first;
+        }
+        let direct = all.subset(&moving, true);
+        let Some(k2) = profile_k2(&direct) else {
             return first;
         };
         let mut q = p;
