@@ -1947,13 +1947,8 @@ fn fit_regression(
         let profile_k2 = |direct: &Rows| {
             let w = weights_at(&p, direct);
             let c_fixed = correction(direct, &active, &w);
-            let at_start = {
-                let (jtj, jtr, _) = normal_with(&p, direct, &active, &w, &c_fixed);
-                solve(&jtj, &jtr, &active)
-                    .map(|dq| objective(&(p + dq), direct, &w, &c_fixed))
-                    .filter(|c| c.is_finite())
-                    .unwrap_or(f64::INFINITY)
-            };
+            let at_start =
+                linear_fit(&p, direct, &active, &w, &c_fixed).map_or(f64::INFINITY, |(c, _)| c);
             k2_profile(&p, direct, &active, &w, &c_fixed)
                 .filter(|(c, _)| *c < at_start - PROFILE_MARGIN)
                 .map(|(_, q)| q[K2])
@@ -2015,12 +2010,11 @@ fn fit_regression(
                     let mut act = active;
                     // Kept only with the same parameters (nothing dropped) and a lower objective,
                     // each at its own weights.
-                    let score = |q: &V7, rs: &Rows| {
-                        let w = weights_at(q, rs);
-                        objective(q, rs, &w, &correction(rs, &active, &w))
-                    };
                     if let Ok((r, _)) = joint_fit(q, &mut restart_rows, &mut act) {
-                        if act == active && score(&r, &restart_rows) < score(&p, &rows) {
+                        if act == active
+                            && objective_at_own_weights(&r, &restart_rows, &active)
+                                < objective_at_own_weights(&p, &rows, &active)
+                        {
                             p = r;
                             rows = restart_rows;
                         }
@@ -2042,12 +2036,11 @@ fn fit_regression(
         let second = from(q, active, not_identifiable);
         // Each fit's objective on the moving samples without the parallel filter, at its own
         // weights.
-        let score = |p: &V7, active: &Active| {
-            let w = weights_at(p, &direct);
-            objective(p, &direct, &w, &correction(&direct, active, &w))
+        let score = |f: &(Rows, V7, Active, Vec<String>, Vec<Vec<f64>>)| {
+            objective_at_own_weights(&f.1, &direct, &f.2)
         };
         match (first, second) {
-            (Ok(a), Ok(b)) if score(&b.1, &b.2) < score(&a.1, &a.2) - PROFILE_MARGIN => Ok(b),
+            (Ok(a), Ok(b)) if score(&b) < score(&a) - PROFILE_MARGIN => Ok(b),
             (Err(_), Ok(b)) => Ok(b),
             (first, _) => first,
         }
@@ -2275,17 +2268,31 @@ fn k2_profile(p: &V7, rows: &Rows, fixed: &Active, w: &[f64], c: &M7) -> Option<
         q[K2] = PROFILE_K2_PER_MM.0
             * (PROFILE_K2_PER_MM.1 / PROFILE_K2_PER_MM.0)
                 .powf(g as f64 / (PROFILE_POINTS - 1) as f64);
-        let (jtj, jtr, _) = normal_with(&q, rows, fixed, w, c);
-        let Some(dq) = solve(&jtj, &jtr, fixed) else {
+        let Some((objective, q)) = linear_fit(&q, rows, fixed, w, c) else {
             continue;
         };
-        q += dq;
-        let objective = objective(&q, rows, w, c);
-        if objective.is_finite() && best.is_none_or(|(b, _)| objective < b) {
+        if best.is_none_or(|(b, _)| objective < b) {
             best = Some((objective, q));
         }
     }
     best
+}
+
+/// The linear parameters active in `fixed` by one weighted least-squares solve from `p` on
+/// `rows` (k2 as in `p`), with the weights `w` and the noise correction `c`, and the
+/// objective there; None where the solve fails or the objective is not finite.
+fn linear_fit(p: &V7, rows: &Rows, fixed: &Active, w: &[f64], c: &M7) -> Option<(f64, V7)> {
+    let (jtj, jtr, _) = normal_with(p, rows, fixed, w, c);
+    let q = p + solve(&jtj, &jtr, fixed)?;
+    let objective = objective(&q, rows, w, c);
+    objective.is_finite().then_some((objective, q))
+}
+
+/// The corrected objective of `p` on `rows` at its own weights, with the noise correction of
+/// the parameters in `active`: how two fits of the same rows are compared.
+fn objective_at_own_weights(p: &V7, rows: &Rows, active: &Active) -> f64 {
+    let w = weights_at(p, rows);
+    objective(p, rows, &w, &correction(rows, active, &w))
 }
 
 /// Points of the profile over k2 ([`PROFILE_K2_PER_MM`], log-spaced) on which identification
