@@ -1346,13 +1346,16 @@ pub const STROKE_MARGIN: f64 = 0.1;
 /// reversed is zeroed at the stroke's other end, a whole stroke from where it is logged.
 fn outside_stroke(design: &Design, x: &[f64], zero_mm: f64, zero_free: bool) -> Vec<bool> {
     let xmax = design.xmax_mm();
-    let margin = xmax * STROKE_MARGIN;
     x.iter()
-        .map(|&x| {
-            let d = x - zero_mm;
-            !zero_free && !(-margin..=xmax + margin).contains(&d)
-        })
+        .map(|&x| !zero_free && beyond_stroke(x - zero_mm, xmax))
         .collect()
+}
+
+/// Whether a deflection `x_mm` lies beyond the stroke `0 ..= xmax_mm` by more than its
+/// margin ([`STROKE_MARGIN`]): the one rule the diagnosis and validate's coverage share.
+pub fn beyond_stroke(x_mm: f64, xmax_mm: f64) -> bool {
+    let margin = xmax_mm * STROKE_MARGIN;
+    !(-margin..=xmax_mm + margin).contains(&x_mm)
 }
 
 /// 1.4826 times the median absolute deviation from the median (the standard deviation of

@@ -27,6 +27,7 @@ use crate::estimate::log::CalibrationLog;
 use crate::estimate::pipeline::EstimateRun;
 use crate::estimate::sg;
 use crate::model::{ExpLaw, ForceLaw};
+use crate::verdict::diagnose;
 
 /// The spring force the EKF's state implies: sigma / k2 + F0 (the affine relation), with F0
 /// from the parallel filter's `offsets`.
@@ -740,14 +741,13 @@ pub fn coverage(
             100.0 * TOP_FORCE_SHARE
         ));
     }
-    let margin = crate::verdict::diagnose::STROKE_MARGIN * xmax_mm;
-    if lo < -margin || hi > xmax_mm + margin {
+    if diagnose::beyond_stroke(lo, xmax_mm) || diagnose::beyond_stroke(hi, xmax_mm) {
         warnings.push(format!(
             "the log's positions reach x = {lo:.2} ... {hi:.2} mm, beyond the designed stroke \
              0 ... {xmax_mm:.2} mm by more than {:.0} % of it: the built part's rod cannot \
              travel there (check the encoder's zero, sign and unit: --position-offset, \
              --position), and the force curve is judged on the stroke alone",
-            100.0 * crate::verdict::diagnose::STROKE_MARGIN
+            100.0 * diagnose::STROKE_MARGIN
         ));
     }
     let uncovered = 100.0 * (1.0 - fraction);
