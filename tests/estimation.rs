@@ -408,6 +408,80 @@ fn m_is_claimed_no_more_precisely_than_identification_where_the_frictions_sign_i
     assert_eq!(est.unresolved_friction_sign, None);
 }
 
+/// Where the friction's sign is not resolved, the filter's friction stage reads the rod as
+/// sliding for a while after each stop, and its k2 leans high: on the heavy transmission's
+/// steps (d0 0.5 N, half speed) +0.6 % on average, beyond the 0.5 % target, while
+/// identification's k2 is unbiased with honest deviations. The reported k2 is then
+/// identification's, with its standard deviation, and the filter's own is kept beside it.
+/// Judged against the simulator's truth: the reported k2's mean error over the seeds is within
+/// 0.25 %, each within 3 of its deviations, where the filter's own leans high.
+#[test]
+fn k2_is_identifications_where_the_frictions_sign_is_not_resolved() {
+    use camspring::estimate::identify::Param;
+    use rayon::prelude::*;
+    let dynamics = Dynamics {
+        m_n_s2_per_mm: 0.25,
+        d0_n: 0.5,
+        d1_n_s_per_mm: 1.5,
+        d2_n_s3_per_mm3: -0.008,
+    };
+    let law = ExpLaw {
+        mu_n: 1.1,
+        k2_per_mm: 0.24,
+        f0_n: 2.0 + 2.5 * dynamics.d0_n,
+    };
+    // (reported k2's relative error, its z, the filter's own relative error)
+    let runs: Vec<(f64, f64, f64)> = (0..12u64)
+        .into_par_iter()
+        .filter_map(|seed| {
+            let settings = SimSettings {
+                profile: Profile::Steps,
+                seed,
+                speed: 0.5,
+                dynamics,
+                ..SimSettings::default()
+            };
+            // Some seeds' steps would need the wire to push; the simulator refuses them.
+            let (log, _) = simulate(law, 15.0, 500.0, &settings).ok()?;
+            let est =
+                estimate_log(&log, &options(Noise::default(), Discretization::Rk4), false).unwrap();
+            assert!(est.unresolved_friction_sign.is_some(), "seed {seed}");
+            let own = est.filter_k2.expect("the filter's own k2 is kept");
+            let id = est.identification.as_ref().unwrap().get(Param::K2);
+            let (k2, sd) = (est.run.last.z[idx::K2], est.run.last.std()[idx::K2]);
+            assert_eq!(Some(k2), id.value, "seed {seed}");
+            assert!(
+                (sd / id.std.unwrap() - 1.0).abs() < 1e-9,
+                "seed {seed}: {sd}"
+            );
+            let truth = law.k2_per_mm;
+            Some((
+                k2 / truth - 1.0,
+                (k2 - truth) / sd,
+                own.k2_per_mm / truth - 1.0,
+            ))
+        })
+        .collect();
+    assert!(runs.len() >= 8, "{} runs simulated", runs.len());
+    let n = runs.len() as f64;
+    let mean = runs.iter().map(|r| r.0).sum::<f64>() / n;
+    let own_mean = runs.iter().map(|r| r.2).sum::<f64>() / n;
+    eprintln!(
+        "heavy steps, {} runs: reported k2 mean error {:+.3} %, the filter's own {:+.3} %",
+        runs.len(),
+        100.0 * mean,
+        100.0 * own_mean
+    );
+    assert!(mean.abs() < 0.0025, "mean error {mean}");
+    assert!(
+        own_mean > mean.abs(),
+        "the filter's own k2 no longer leans high: {own_mean}"
+    );
+    for r in &runs {
+        assert!(r.1.abs() < 3.0, "{r:?}");
+    }
+}
+
 /// Rigs log from 100 Hz to kilohertz rates. Identification averages fast logs in blocks down
 /// to about 100 Hz, where the noise is smaller: its shortest windows then carry almost no
 /// signal in the inertia's information (an 800 Hz log once had m, F0 and mu 3 sigma off at

@@ -589,9 +589,11 @@ pub fn estimate_json(est: &EstimateRun) -> Value {
             "log_length_factor_for_target": w.log_length_factor,
             "relative_disagreement_with_identification": w.relative_disagreement,
             "relative_identification_filter_bias": w.relative_identification_bias,
+            "identification_law_imprecise": w.identification_law_imprecise,
         })).collect::<Vec<_>>(),
         "recovery": est.recovery,
         "unresolved_friction_sign": est.unresolved_friction_sign,
+        "filter_k2": est.filter_k2,
         "inertia_unidentified": est.inertia_unidentified(),
         "twins": est.twins,
         "consistency": est.consistency,
@@ -641,15 +643,23 @@ pub fn format_consistency(est: &EstimateRun) -> String {
             s,
             "note: the friction d0 = {:.3} N is within four standard deviations of the force \
              the frictionless model leaves ({:.3} N), so its sign at starts and stops is read \
-             wrong at times, by identification and the filter alike: {}k2 and d2 carry their \
-             whole difference from identification's in their standard deviations",
+             wrong at times, by identification and the filter alike: {}{}d2 carries its \
+             whole difference from identification's in its standard deviation",
             u.d0_n,
             u.frictionless_force_std_n,
             if est.settings.reports(idx::M) {
                 "M is claimed no more precisely than identification's (the filter's M shares \
-                 its error), and "
+                 its error), "
             } else {
                 ""
+            },
+            match &est.filter_k2 {
+                Some(k) => format!(
+                    "k2 is identification's (the filter's own, {:.5} +- {:.5} 1/mm, also \
+                     reads the rod as sliding after it stops, and leans high), and ",
+                    k.k2_per_mm, k.k2_per_mm_std
+                ),
+                None => "k2 carries its whole difference from identification's, and ".into(),
             }
         );
     }
@@ -689,6 +699,22 @@ pub fn format_consistency(est: &EstimateRun) -> String {
         }
     }
     for w in est.imprecise() {
+        if w.identification_law_imprecise {
+            let _ = writeln!(
+                s,
+                "warning: k2 is identification's (+-{:.2} %, 1 sigma), and identification \
+                 determines the spring law on this log less precisely than its target (k2 \
+                 within 0.5 %, mu within 1.5 %, at 2 sigma): {}",
+                100.0 * w.relative_std,
+                match w.log_length_factor {
+                    Some(longer) => format!(
+                        "a log about {longer:.1} times longer, or one with more motion, meets it"
+                    ),
+                    None => "a log with more motion meets it".into(),
+                }
+            );
+            continue;
+        }
         let mut remedy = match w.log_length_factor {
             Some(longer) => {
                 format!("needs a log about {longer:.1} times longer, or one with more motion")

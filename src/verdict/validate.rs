@@ -321,7 +321,12 @@ pub fn validate_with(
         Some(run) => {
             add(
                 "k2",
-                "EKF exponent rate k2 against the design",
+                if est.is_some_and(|e| e.filter_k2.is_some()) {
+                    "exponent rate k2 against the design (identification's: the friction's sign \
+                     is not resolved, and the EKF's own k2 reads stops late)"
+                } else {
+                    "EKF exponent rate k2 against the design"
+                },
                 100.0 * (run.last.z[idx::K2] / designed.k2_per_mm - 1.0).abs(),
             );
             (run.last.z[idx::K2], run.last.std()[idx::K2])
