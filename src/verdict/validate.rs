@@ -7,7 +7,8 @@
 //! - `k2`: the EKF's converged exponent rate against the designed k2;
 //! - `stiffness_force_line`: over the converged second half of the run, the RMS deviation of
 //!   the estimated stiffness sigma(t) from the designed line sigma = k2 (F - F0) at the
-//!   estimated spring force F = sigma / k2_est + F0_est;
+//!   estimated spring force F = sigma / k2_est + F0_est (not judged where the path is off
+//!   identification's law by more than the tolerance too: the filter is off, not the spring);
 //! - `force_rms` and `force_max`: the identified characteristic mu exp(k2 x) + F0 against the
 //!   designed one over the deflections the log covers, RMS and maximum relative deviation.
 //!
@@ -132,6 +133,11 @@ pub fn not_shown_notes(criteria: &[Criterion]) -> Vec<String> {
             let narrows = match c.name {
                 "k2" => {
                     "a longer log, or one over more of the stroke, narrows k2 (identify says how much longer)"
+                }
+                "stiffness_force_line" => {
+                    "the filter's stiffness path is as far from identification's law as from the \
+                     design, so the filter, not the spring, is off there (its model misses a force \
+                     the log carries); k2 and the force curve judge the law"
                 }
                 _ => "more passes over the stroke, or a longer log, narrow the bins' standard errors",
             };
@@ -342,6 +348,7 @@ pub fn validate_with(
         }
     };
     // Stiffness against force over the converged half.
+    let mut off_identification = false;
     if let Some(run) = run {
         let n = run.rows.len();
         // The filter's stiffness scatters about the truth by its own standard deviation: only
@@ -362,22 +369,42 @@ pub fn validate_with(
         // The line is drawn through the filter's force, sigma / k2 + F0: an error in the
         // parallel filter's F0 shifts it by k2 times that error.
         let f0_std = run.offset_filter.std()[0];
-        let (mut num, mut den) = (0.0, 0.0);
-        for r in &run.rows[n / 2..] {
-            let (z, off) = (&r.state, &r.offsets);
-            let force = spring_force_n(z, off);
-            let line = designed.k2_per_mm * (force - designed.f0_n);
-            num += (z[idx::SIGMA] - line).powi(2)
-                - r.std[idx::SIGMA].powi(2)
-                - (line * init_rel).powi(2)
-                - (designed.k2_per_mm * r.offset_stds[0].max(f0_std)).powi(2);
-            den += line * line;
-        }
-        let mean_square = num / den.max(1e-300);
+        // The path's RMS deviation from the line of a law, relative to the line (percent),
+        // beyond the standard deviations above.
+        let path_deviation = |law: &ExpLaw| {
+            let (mut num, mut den) = (0.0, 0.0);
+            for r in &run.rows[n / 2..] {
+                let (z, off) = (&r.state, &r.offsets);
+                let force = spring_force_n(z, off);
+                let line = law.k2_per_mm * (force - law.f0_n);
+                num += (z[idx::SIGMA] - line).powi(2)
+                    - r.std[idx::SIGMA].powi(2)
+                    - (line * init_rel).powi(2)
+                    - (law.k2_per_mm * r.offset_stds[0].max(f0_std)).powi(2);
+                den += line * line;
+            }
+            100.0 * (num / den.max(1e-300)).max(0.0).sqrt()
+        };
+        let deviation = path_deviation(designed);
+        // A path as far from identification's law (resolved, k2 and mu) as from the design
+        // says that the filter, not the spring, is off: its model misses a force the log
+        // carries. It is then not judged, and the verdict rests on k2 and the force curve.
+        // (Sweep draw 1129 of the independent rig, a servo's velocity steps on a heavy rod, m
+        // 0.195 that identification leaves out with its transients: the path stood 11.9 %
+        // off the true law's line and 11.9 % off identification's, whose k2 was 0.24 % off,
+        // and the true law failed.)
+        let id_k2 = id.get(Param::K2);
+        let id_resolved = id_k2
+            .value
+            .zip(id_k2.std)
+            .is_some_and(|(v, s)| k2_resolved(v, s))
+            && identified.mu_n.is_finite()
+            && identified.f0_n.is_finite();
+        off_identification = id_resolved && path_deviation(&identified) > tol;
         add(
             "stiffness_force_line",
             "RMS of estimated stiffness against the designed line sigma = k2 (F - F0), beyond the filter's own standard deviations (stiffness, F0) and the spread identification's error gives it",
-            100.0 * mean_square.max(0.0).sqrt(),
+            deviation,
         );
     }
     // Force-deflection over the measured range.
@@ -425,6 +452,16 @@ pub fn validate_with(
         } else {
             f64::INFINITY
         });
+    }
+    let line = criteria
+        .iter_mut()
+        .find(|c| c.name == "stiffness_force_line");
+    if let (true, Some(c)) = (off_identification, line) {
+        c.what = "RMS of estimated stiffness against the designed line sigma = k2 (F - F0): not \
+                  judged, the filter's stiffness path is off identification's law by more than \
+                  the tolerance as well";
+        c.pass = true;
+        c.deviation_upper_percent = Some(f64::INFINITY);
     }
     let (pass, conclusive, judged) = settle(&criteria, criteria.iter().all(|c| c.pass));
     Validation {
