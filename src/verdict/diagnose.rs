@@ -256,6 +256,16 @@ pub struct DiagnosisBin {
     /// samples' own scatter about the curve's local slope.
     /// Added to it, the fitted inertia's and damper's error, which every pass shares.
     pub measured_std_n: f64,
+    /// The part of `measured_std_n` from the passes' scatter alone (N): independent from one
+    /// bin to the next.
+    pub pass_std_n: f64,
+    /// The rest, the error of the fitted inertia, damping and outside friction taken out (N),
+    /// as four independent components: it is shared between bins, two bins' errors covarying
+    /// by the dot product of theirs (an outside friction fitted low raises every loading bin
+    /// and lowers every unloading bin alike). Its squared length and `pass_std_n` squared
+    /// add up to `measured_std_n` squared.
+    #[serde(skip)]
+    pub shared_error_n: [f64; 4],
     /// The design's forward model there, built as designed and logged with a true zero (N).
     pub designed_n: f64,
     /// The forward model with the fitted build (N).
@@ -1704,6 +1714,7 @@ fn bin_curves(
         }
         previous = Some((k, side));
     }
+    let shared = shared_factor(cov);
     let (mut before, mut after, mut scale) = (0.0, 0.0, 0.0);
     for (k, bin) in sums.iter().enumerate() {
         for (side, &(sx, sf, count)) in bin.iter().enumerate() {
@@ -1725,17 +1736,16 @@ fn bin_curves(
             // (A parameter the log carries no information on, its variance unbounded, is
             // left out: its regressor is then nothing in the samples.)
             let g = regressors[k][side].map(|v| v / n);
-            let dynamics_var: f64 = (0..4)
-                .flat_map(|a| (0..4).map(move |b| (a, b)))
-                .map(|(a, b)| g[a] * g[b] * cov[(4 + a, 4 + b)])
-                .filter(|v| v.is_finite())
-                .sum();
-            let measured_std_n = scatter_std_n.hypot(dynamics_var.max(0.0).sqrt());
+            let shared_error_n = shared.map(|column| (0..4).map(|a| g[a] * column[a]).sum());
+            let shared_var: f64 = shared_error_n.iter().map(|h: &f64| h * h).sum();
+            let measured_std_n = scatter_std_n.hypot(shared_var.sqrt());
             let b = DiagnosisBin {
                 x_mm: xm,
                 loading,
                 measured_n: mean,
                 measured_std_n,
+                pass_std_n: scatter_std_n,
+                shared_error_n,
                 designed_n: spring_force(design, &nominal, xm, loading),
                 refitted_n: spring_force(design, &build, xm, loading),
                 samples: count,
@@ -1748,6 +1758,28 @@ fn bin_curves(
     }
     diagnosis.force_error_before_percent = 100.0 * (before / scale.max(1e-300)).sqrt();
     diagnosis.force_error_after_percent = 100.0 * (after / scale.max(1e-300)).sqrt();
+}
+
+/// A factor of the fitted dynamics' covariance (m, d0, d1 and d2, the last four of the fit's
+/// parameters): four columns v_c with C = sum_c v_c v_c', so that a bin with mean regressors g
+/// has the shared error components g . v_c ([`DiagnosisBin::shared_error_n`]). A parameter
+/// the log carries no information on (its variance unbounded) is left out: its regressor is
+/// then nothing in the samples.
+fn shared_factor(cov: &DMatrix<f64>) -> [[f64; 4]; 4] {
+    let bounded = |a: usize| cov[(4 + a, 4 + a)].is_finite();
+    let c = nalgebra::Matrix4::from_fn(|a, b| {
+        let v = cov[(4 + a, 4 + b)];
+        if bounded(a) && bounded(b) && v.is_finite() {
+            v
+        } else {
+            0.0
+        }
+    });
+    let eigen = c.symmetric_eigen();
+    std::array::from_fn(|col| {
+        let root = eigen.eigenvalues[col].max(0.0).sqrt();
+        std::array::from_fn(|a| eigen.eigenvectors[(a, col)] * root)
+    })
 }
 
 /// A bin's standard error from its passes, each (sum of its samples' forces about the curve's
