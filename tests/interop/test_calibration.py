@@ -954,6 +954,26 @@ def test_a_filter_path_as_far_from_identifications_law_as_from_the_design_does_n
     assert abs(right["identified"]["k2_per_mm"] / tr.k2 - 1.0) < 0.01, right["identified"]
 
 
+def test_an_outside_friction_fitted_low_does_not_fail_the_true_law_through_every_bin_at_once(tmp_path):
+    """Sweep draw 1108: force control of a light rod with strong stick-slip (m 0.025, d0 3.12 N
+    on a force of 6.8 to 11 N, 100 Hz, 30 % of the stroke). The diagnosis's d0 is 2.45 +- 0.19
+    N, and the 0.67 N it leaves in puts every loading bin about 0.5 N high. force_rms held
+    that error as independent from bin to bin and the true law failed at 5.9 % (lower bound
+    4.8 %); the error is now one shift of all the bins, and the true law passes, not
+    conclusive, with an upper bound beyond the tolerance. Where the bins lie off the law by
+    more than that shift explains (a law with mu 15 % low) it still fails."""
+    tr, log = sweep_log(tmp_path, 1108)
+    rc, right = validate_json(tmp_path, tr, log, 1.0)
+    assert rc == 0 and right["pass"] and not right["conclusive"], right["criteria"]
+    rms = {c["name"]: c for c in right["criteria"]}["force_rms"]
+    assert rms["deviation_percent"] > 3.0 and rms["deviation_upper_percent"] > 3.0, rms
+    d0, d0_std = right["diagnosis"]["d0_n"]
+    assert d0 < tr.d0 - 2.0 * d0_std, (d0, d0_std)
+    low = dataclasses.replace(tr, mu=0.85 * tr.mu)
+    rc, wrong = validate_json(tmp_path, low, log, 1.0)
+    assert rc == 1 and not wrong["pass"], wrong["criteria"]
+
+
 @pytest.mark.parametrize("i", [84, 86])
 def test_validate_passes_the_true_law_on_sweep_draws_84_and_86(tmp_path, i):
     """Sweep draws 84 (a servo's ramp-holds of a light damper with a strong cube: m 0.21,
