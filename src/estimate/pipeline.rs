@@ -193,7 +193,7 @@ pub struct EstimateRun {
     /// no more precisely than identification's; None elsewhere.
     pub unresolved_friction_sign: Option<UnresolvedFrictionSign>,
     /// Where the friction's sign is not resolved, the reported k2 is identification's
-    /// (`widen_to_disagreement`); the filter's own k2 (after the twins) is kept here.
+    /// (`reconcile_with_identification`); the filter's own k2 (after the twins) is kept here.
     pub filter_k2: Option<FilterK2>,
 }
 
@@ -219,7 +219,7 @@ pub struct FilterK2 {
 /// Table I's ramp-holds (d0 3.82 N, resolved) its M error was 1.07 % against identification's
 /// 1.75 %, at RMS z 1.04. There M is claimed no more precisely than identification
 /// ([`M_PRECISION_GAIN_MAX`] is 1), k2 is identification's, and d2 takes its whole
-/// difference from identification into its standard deviation (`widen_to_disagreement`).
+/// difference from identification into its standard deviation (`reconcile_with_identification`).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct UnresolvedFrictionSign {
     /// Coulomb friction d0 (N), as the filter started from it.
@@ -1581,9 +1581,9 @@ where
         consistency.reasons.push(why);
     }
     let std_before_disagreement = run.last.std();
-    let filter_k2 = identification
-        .as_ref()
-        .and_then(|id| widen_to_disagreement(&mut run, id, unresolved_friction_sign.is_some()));
+    let filter_k2 = identification.as_ref().and_then(|id| {
+        reconcile_with_identification(&mut run, id, unresolved_friction_sign.is_some())
+    });
     Ok(EstimateRun {
         run,
         settings,
@@ -1982,7 +1982,7 @@ fn widen_to_identification(run: &mut EkfRun, id: &Identification, m_gain_max: f6
             continue;
         };
         // Where identification resolves M, the filter's own standard deviation of M matches
-        // its errors over seeds on most runs, and stands ([`widen_to_disagreement`]) down to
+        // its errors over seeds on most runs, and stands ([`reconcile_with_identification`]) down to
         // identification's over [`M_PRECISION_GAIN_MAX`].
         if k == ekf::idx::M && s_id <= M_RESOLVED * v.abs() {
             // Nor more precisely than identification's correction of m for its window's loss
@@ -2050,7 +2050,7 @@ fn inertia_left_out(id: &Identification) -> bool {
 /// claimed it to +-0.0004 N s/mm on a light transmission's slow run where it was 0.08 off
 /// (identification: d1 to +-0.02), and to 0.06 % on a heavy one's sines where it was 2.4 of that
 /// off; its final standard deviation is held to identification's and to their disagreement
-/// ([`widen_to_identification`], [`widen_to_disagreement`]).
+/// ([`widen_to_identification`], [`reconcile_with_identification`]).
 fn identified_damping(run: &EkfRun, id: &Identification) -> Option<(f64, f64)> {
     use super::identify::Param;
     let (d1, s_d1) = (id.get(Param::D1).value?, id.get(Param::D1).std?);
@@ -2095,9 +2095,10 @@ fn widen_offset(run: &mut EkfRun, k: usize, floor: f64) {
     }
 }
 
-/// Brings the filter's standard deviations of M, d2 and k2 (and the generalised damping D, and
-/// the parallel filter's F0 and d0) up to their disagreement with identification of the same
-/// log, where they are below. Two estimates of one quantity with
+/// Reconciles the filter's result with identification of the same log: brings the filter's
+/// standard deviations of M, d2 and k2 (and the generalised damping D, and the parallel
+/// filter's F0 and d0) up to their disagreement with identification, where they are below;
+/// and, where the friction's sign is not resolved, puts identification's k2 in place (below). Two estimates of one quantity with
 /// independent errors differ by d with E[d^2] = s_filter^2 + s_identify^2; the filter takes as
 /// its own at least half of the observed d^2, and at least all of it that identification's
 /// variance does not explain: sqrt(max(d^2 / 2, d^2 - s_identify^2)). On slow ramp-hold runs
@@ -2129,7 +2130,7 @@ fn widen_offset(run: &mut EkfRun, k: usize, floor: f64) {
 /// It is applied after the consistency check, which compares the two with their own standard
 /// deviations; the standard deviations before it are kept
 /// ([`EstimateRun::std_before_disagreement`]).
-fn widen_to_disagreement(
+fn reconcile_with_identification(
     run: &mut EkfRun,
     id: &Identification,
     sign_unresolved: bool,
