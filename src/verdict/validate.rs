@@ -853,15 +853,17 @@ const SHARED_SIGMAS: f64 = 2.0;
 ///
 /// - The estimate: sum of d_i^2 less each bin's variance (p_i + |h_i|^2), its mean being the
 ///   true deviations' sum of squares.
-/// - The passes' scatter is independent from bin to bin: the sum of squares of deviations d
-///   has the standard deviation sqrt(sum 2 p_i^2 + 4 d_i^2 p_i), and its bounds are two of
-///   those either side.
+/// - The passes' scatter is independent from bin to bin: with R(d) = sqrt(sum d_i^2 - p_i),
+///   the sum of squares has the standard deviation s(d) = sqrt(sum 2 p_i^2 + 4 d_i^2 p_i),
+///   and R moves by a = R - sqrt(R^2 - 2 s) down and sqrt(R^2 + 2 s) - R up.
 /// - The shared error (the fitted inertia, damping and outside friction taken out of every
 ///   bin, [`crate::verdict::diagnose::DiagnosisBin::shared_error_n`]) does not average down
-///   over the bins. The lower bound takes the shift of at most [`SHARED_SIGMAS`] of its
-///   standard deviations that brings the deviations nearest the law, and then the passes'
-///   lower bound; the upper bound adds the largest such shift's length to the root of the
-///   passes' upper bound.
+///   over the bins: it shifts them all, h_i' c for c in its standard deviations. Down, R
+///   moves by b = R(d) - R(d - H c*), c* the shift of at most [`SHARED_SIGMAS`] that brings
+///   the deviations nearest the law; up, by at most the longest such shift,
+///   [`SHARED_SIGMAS`] sqrt(l_max(H'H)) (the triangle inequality).
+/// - The two are independent, and their moves add in quadrature: the bounds are
+///   R -+ sqrt(a^2 + b^2), squared.
 ///
 /// (Held independent, on sweep draw 1108 of the independent rig, a force-controlled rod
 /// with 3.1 N of friction over 30 % of the stroke, the outside friction came out at 2.45 +-
@@ -922,12 +924,17 @@ pub fn rms_bounds(bins: &[(f64, f64, [f64; 4])]) -> (f64, f64, f64) {
         c = shift(hi);
     }
     let shifted = |i: usize| bins[i].0 - nalgebra::Vector4::from(bins[i].2).dot(&c);
-    let (sq_near, spread_near) = passes(&shifted);
-    let lower = sq_near - spread_near;
+    let root = |sq: f64| sq.max(0.0).sqrt();
     let (sq_all, spread_all) = passes(&|i| bins[i].0);
-    let largest_shift = SHARED_SIGMAS * eigen.eigenvalues.amax().max(0.0).sqrt();
-    let upper = ((sq_all + spread_all).max(0.0).sqrt() + largest_shift).powi(2);
-    (estimate, lower.max(0.0), upper)
+    let (sq_near, _) = passes(&shifted);
+    let r = root(sq_all);
+    let passes_down = r - root(sq_all - spread_all);
+    let passes_up = root(sq_all + spread_all) - r;
+    let shift_down = (r - root(sq_near)).max(0.0);
+    let shift_up = SHARED_SIGMAS * eigen.eigenvalues.amax().max(0.0).sqrt();
+    let lower = (r - passes_down.hypot(shift_down)).max(0.0).powi(2);
+    let upper = (r + passes_up.hypot(shift_up)).powi(2);
+    (estimate, lower, upper)
 }
 
 /// The force criteria judged on the stroke the design corrects, from a diagnosis's binned
@@ -1556,13 +1563,14 @@ mod tests {
             .map(|k| law.force_n(0.5 + 0.5 * k as f64).powi(2))
             .sum();
         // Shared: a shift of two of its standard deviations takes every bin onto the law, so
-        // the lower bound is nothing and the true law is not failed. The upper bound is the
-        // passes' bound on the deviations as they stand, sqrt(30 (0.36 - 0.0025) + 2 sqrt(30
-        // (2 0.0025^2 + 4 0.36 0.0025))), plus the shift's length 2 sqrt(30) 0.3.
+        // the lower bound is nothing and the true law is not failed. Up, the passes move the
+        // root of 30 (0.36 - p) by sqrt(30 (0.36 - p) + 2 sqrt(30 (2 p^2 + 4 0.36 p))) less
+        // itself, the shift by 2 sqrt(30) 0.3, in quadrature.
         let c = rms(bins(1.0, [shared, 0.0, 0.0, 0.0], own));
         let p = own * own;
-        let passes = 30.0 * (0.36 - p) + 2.0 * (30.0 * (2.0 * p * p + 4.0 * 0.36 * p)).sqrt();
-        let upper = 100.0 * (passes.sqrt() + 2.0 * 30f64.sqrt() * shared) / sum_f2.sqrt();
+        let r = (30.0 * (0.36 - p)).sqrt();
+        let passes_up = (r * r + 2.0 * (30.0 * (2.0 * p * p + 4.0 * 0.36 * p)).sqrt()).sqrt() - r;
+        let upper = 100.0 * (r + passes_up.hypot(2.0 * 30f64.sqrt() * shared)) / sum_f2.sqrt();
         assert!(c.pass && !c.shown(), "{c:?}");
         assert!(
             (c.deviation_upper_percent.unwrap() - upper).abs() < 1e-9,
@@ -1573,24 +1581,29 @@ mod tests {
         let c = rms(bins(1.0, [0.0; 4], own.hypot(shared)));
         assert!(!c.pass, "{c:?}");
         // A spring 10 % stiff fails through the shared error: shifted by 0.6 N, its bins stand
-        // 10 % off the law, less the passes' two standard deviations.
+        // 10 % off the law. The root r of the sum of d^2 - p moves down by the shift to that
+        // of (0.1 F)^2 - p, and by the passes' two standard deviations, in quadrature.
         let c = rms(bins(1.1, [shared, 0.0, 0.0, 0.0], own));
         assert!(!c.pass, "{c:?}");
-        let near: f64 = (0..30)
-            .map(|k| (0.1 * law.force_n(0.5 + 0.5 * k as f64)).powi(2))
-            .sum();
-        let spread = 2.0 * (30.0 * 2.0 * p * p + 4.0 * p * near).sqrt();
         let stiff: Vec<(f64, f64, [f64; 4])> = (0..30)
             .map(|k| {
                 let f = law.force_n(0.5 + 0.5 * k as f64);
                 (0.1 * f + 2.0 * shared, p, [shared, 0.0, 0.0, 0.0])
             })
             .collect();
+        let sq: f64 = stiff.iter().map(|b| b.0 * b.0 - p).sum();
+        let spread = 2.0
+            * stiff
+                .iter()
+                .map(|b| 2.0 * p * p + 4.0 * b.0 * b.0 * p)
+                .sum::<f64>()
+                .sqrt();
+        let near: f64 = stiff.iter().map(|b| (b.0 - 2.0 * shared).powi(2) - p).sum();
+        let r = sq.sqrt();
+        let expected = (r - (r - (sq - spread).sqrt()).hypot(r - near.sqrt())).powi(2);
         let (_, lower, _) = rms_bounds(&stiff);
-        assert!(
-            (lower - (near - 30.0 * p - spread)).abs() < 1e-9 * near,
-            "{lower} {near}"
-        );
+        assert!((lower - expected).abs() < 1e-9 * sq, "{lower} {expected}");
+        assert!(100.0 * (lower / sum_f2).sqrt() > 3.0);
     }
 
     #[test]
