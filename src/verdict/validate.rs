@@ -1001,6 +1001,9 @@ pub fn stroke_criteria(
             // of the force leave errors that a pass through the bin shares (on an independent
             // rig's trapezoidal moves with Table I's friction, bins scattered 1.3 % RMS about
             // the true law, and the largest reached 3.25 % against a 3 % tolerance).
+            // force_max has no upper bound: one sparse bin at an end of the range, its standard
+            // error a few percent of the force, would leave every log's pass unshown, while
+            // its smooth neighbours hold the curve there.
             let (mut dsq, mut max) = (0.0_f64, 0.0_f64);
             let z = bin_sigmas(points.len());
             for p in &points {
