@@ -1075,6 +1075,9 @@ pub fn stroke_criteria(
         Some(b) => {
             let mut exits: Vec<BandExit> = Vec::new();
             let mut worst = 0.0_f64;
+            // A bin is outside the band only beyond its standard error times the bins'
+            // multiple-comparison factor, as for force_max: a failure is one the log shows.
+            let z = bin_sigmas(d.bins.len());
             for bin in &d.bins {
                 // The band's stations bracketing the bin, linearly.
                 let j = b
@@ -1100,14 +1103,15 @@ pub fn stroke_criteria(
                     _ => continue,
                 };
                 let f = bin.measured_n;
-                let (side, beyond, edge) = if f > hi {
+                let allowance = z * bin.measured_std_n;
+                let (side, beyond, edge) = if f > hi + allowance {
                     ("above", f - hi, hi)
-                } else if f < lo {
+                } else if f < lo - allowance {
                     ("below", lo - f, lo)
                 } else {
                     continue;
                 };
-                worst = worst.max(beyond / edge.abs().max(1e-9));
+                worst = worst.max((beyond - allowance) / edge.abs().max(1e-9));
                 match exits.last_mut() {
                     Some(e) if e.side == side && bin.x_mm >= e.to_mm => {
                         e.to_mm = bin.x_mm;
@@ -1124,7 +1128,7 @@ pub fn stroke_criteria(
             (
                 vec![Criterion {
                     name: "force_band",
-                    what: "the measured quasi-static force, loading and unloading apart, against the 95 % band of builds within the spec's tolerances, lowest unloading to highest loading force (largest excursion beyond it)",
+                    what: "the measured quasi-static force, loading and unloading apart, against the 95 % band of builds within the spec's tolerances, lowest unloading to highest loading force (largest excursion beyond it and beyond its bin's standard error times the bins' multiple-comparison factor)",
                     deviation_percent: 100.0 * worst,
                     tolerance_percent: 0.0,
                     // A log that moves one way only does not resolve the force curve
@@ -1652,5 +1656,78 @@ mod tests {
         for c in &c {
             assert!(c.pass && c.shown() && c.deviation_percent < 1e-9, "{c:?}");
         }
+    }
+
+    #[test]
+    fn a_bin_leaves_the_band_of_builds_only_beyond_its_allowance() {
+        // A band 10 % either side of the law, and 30 loading bins on its upper edge with a
+        // standard error of 0.5 N; bin 7 stands `off` N above the edge. It leaves the band
+        // only beyond the bins' multiple-comparison factor (3.14 for 30) times 0.5 N.
+        use crate::model::FrictionCorrection;
+        use crate::verdict::diagnose::DiagnosisBin;
+        let law = ForceLaw::Exponential(ExpLaw {
+            mu_n: 10.0,
+            k2_per_mm: 0.1,
+            f0_n: 0.0,
+        });
+        let x_mm: Vec<f64> = (0..=16).map(f64::from).collect();
+        let band = ForceBand {
+            samples: 1000,
+            seed: 0,
+            quantiles: [0.025, 0.975],
+            loading_lo_n: x_mm.iter().map(|&x| Some(law.force_n(x))).collect(),
+            loading_hi_n: x_mm.iter().map(|&x| Some(1.1 * law.force_n(x))).collect(),
+            unloading_lo_n: x_mm.iter().map(|&x| 0.9 * law.force_n(x)).collect(),
+            unloading_hi_n: x_mm.iter().map(|&x| law.force_n(x)).collect(),
+            x_mm,
+            sensitivity: Vec::new(),
+        };
+        // Bin k at x = 0.5 + 0.5 k lies between stations, where the band's edge is the
+        // linear interpolation of 1.1 F at the stations either side.
+        let edge = |x: f64| {
+            let (a, b) = (x.floor(), x.floor() + 1.0);
+            1.1 * (law.force_n(a) + (law.force_n(b) - law.force_n(a)) * (x - a))
+        };
+        let bins = |off: f64| -> Vec<DiagnosisBin> {
+            (0..30)
+                .map(|k| {
+                    let x = 0.5 + 0.5 * k as f64;
+                    DiagnosisBin {
+                        x_mm: x,
+                        loading: true,
+                        measured_n: edge(x) + if k == 7 { off } else { 0.0 },
+                        measured_std_n: 0.5,
+                        pass_std_n: 0.5,
+                        shared_error_n: [0.0; 4],
+                        designed_n: law.force_n(x),
+                        refitted_n: law.force_n(x),
+                        samples: 100,
+                    }
+                })
+                .collect()
+        };
+        let judge = |off: f64| {
+            stroke_criteria(
+                &diagnosis(bins(off)),
+                &law,
+                FrictionCorrection::Loading,
+                0.03,
+                Some(&band),
+            )
+        };
+        // 1.5 N: three standard errors, within 3.137 of them.
+        let (c, exits) = judge(1.5);
+        assert!(c[0].pass && exits.is_empty(), "{c:?} {exits:?}");
+        // 3 N: beyond by 3 - 3.137 * 0.5, as a share of the edge at x = 4 mm; the exit says
+        // how far beyond the edge the bin stands.
+        let (c, exits) = judge(3.0);
+        let expected = 100.0 * (3.0 - bin_sigmas(30) * 0.5) / edge(4.0);
+        assert!(
+            !c[0].pass && (c[0].deviation_percent - expected).abs() < 1e-9,
+            "{c:?} {expected}"
+        );
+        assert_eq!(exits.len(), 1, "{exits:?}");
+        assert!(exits[0].side == "above" && exits[0].from_mm == 4.0 && exits[0].to_mm == 4.0);
+        assert!((exits[0].worst_n - 3.0).abs() < 1e-9, "{exits:?}");
     }
 }
