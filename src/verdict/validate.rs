@@ -1412,6 +1412,31 @@ mod tests {
         Diagnosis::fixture(fitted, bins)
     }
 
+    /// A bin at `x_mm` on one stroke with the force `measured_n`, its passes' standard
+    /// deviation and its shared error's components (its standard error from the two), the
+    /// design and the refit on `law`.
+    fn bin(
+        law: &ForceLaw,
+        x_mm: f64,
+        loading: bool,
+        measured_n: f64,
+        pass_std_n: f64,
+        shared_error_n: [f64; 4],
+    ) -> crate::verdict::diagnose::DiagnosisBin {
+        let shared = shared_error_n.iter().map(|h| h * h).sum::<f64>().sqrt();
+        crate::verdict::diagnose::DiagnosisBin {
+            x_mm,
+            loading,
+            measured_n,
+            measured_std_n: pass_std_n.hypot(shared),
+            pass_std_n,
+            shared_error_n,
+            designed_n: law.force_n(x_mm),
+            refitted_n: law.force_n(x_mm),
+            samples: 100,
+        }
+    }
+
     #[test]
     fn force_max_allows_each_bin_the_multiple_comparison_quantile_and_no_bins_are_not_judged() {
         use crate::model::FrictionCorrection;
@@ -1427,17 +1452,7 @@ mod tests {
                 .map(|k| {
                     let x = 0.5 + 0.5 * k as f64;
                     let f = law.force_n(x) + if k == 7 { off } else { 0.0 };
-                    DiagnosisBin {
-                        x_mm: x,
-                        loading: true,
-                        measured_n: f,
-                        measured_std_n: 0.5,
-                        pass_std_n: 0.5,
-                        shared_error_n: [0.0; 4],
-                        designed_n: law.force_n(x),
-                        refitted_n: law.force_n(x),
-                        samples: 100,
-                    }
+                    bin(&law, x, true, f, 0.5, [0.0; 4])
                 })
                 .collect()
         };
@@ -1498,17 +1513,7 @@ mod tests {
         let bins: Vec<DiagnosisBin> = (0..30)
             .map(|k| {
                 let x = 0.5 + 0.5 * k as f64;
-                DiagnosisBin {
-                    x_mm: x,
-                    loading: true,
-                    measured_n: 1.1 * law.force_n(x),
-                    measured_std_n: 0.05,
-                    pass_std_n: 0.05,
-                    shared_error_n: [0.0; 4],
-                    designed_n: law.force_n(x),
-                    refitted_n: law.force_n(x),
-                    samples: 100,
-                }
+                bin(&law, x, true, 1.1 * law.force_n(x), 0.05, [0.0; 4])
             })
             .collect();
         let judge = |share: f64| {
@@ -1542,17 +1547,8 @@ mod tests {
             (0..30)
                 .map(|k| {
                     let x = 0.5 + 0.5 * k as f64;
-                    DiagnosisBin {
-                        x_mm: x,
-                        loading: true,
-                        measured_n: scale * law.force_n(x) + 2.0 * shared,
-                        measured_std_n: pass_std_n.hypot(shared),
-                        pass_std_n,
-                        shared_error_n,
-                        designed_n: law.force_n(x),
-                        refitted_n: law.force_n(x),
-                        samples: 100,
-                    }
+                    let f = scale * law.force_n(x) + 2.0 * shared;
+                    bin(&law, x, true, f, pass_std_n, shared_error_n)
                 })
                 .collect()
         };
@@ -1632,17 +1628,8 @@ mod tests {
                 let sign = if loading { 1.0 } else { -1.0 };
                 (0..30).map(move |k| {
                     let x = 0.5 + 0.5 * k as f64;
-                    DiagnosisBin {
-                        x_mm: x,
-                        loading,
-                        measured_n: law_ref.force_n(x) + sign * 0.6,
-                        measured_std_n: 0.05_f64.hypot(0.3),
-                        pass_std_n: 0.05,
-                        shared_error_n: [sign * 0.3, 0.0, 0.0, 0.0],
-                        designed_n: law_ref.force_n(x),
-                        refitted_n: law_ref.force_n(x),
-                        samples: 100,
-                    }
+                    let f = law_ref.force_n(x) + sign * 0.6;
+                    bin(law_ref, x, loading, f, 0.05, [sign * 0.3, 0.0, 0.0, 0.0])
                 })
             })
             .collect();
@@ -1692,17 +1679,8 @@ mod tests {
             (0..30)
                 .map(|k| {
                     let x = 0.5 + 0.5 * k as f64;
-                    DiagnosisBin {
-                        x_mm: x,
-                        loading: true,
-                        measured_n: edge(x) + if k == 7 { off } else { 0.0 },
-                        measured_std_n: 0.5,
-                        pass_std_n: 0.5,
-                        shared_error_n: [0.0; 4],
-                        designed_n: law.force_n(x),
-                        refitted_n: law.force_n(x),
-                        samples: 100,
-                    }
+                    let f = edge(x) + if k == 7 { off } else { 0.0 };
+                    bin(&law, x, true, f, 0.5, [0.0; 4])
                 })
                 .collect()
         };
