@@ -845,7 +845,7 @@ pub fn bin_sigmas(bins: usize) -> f64 {
 }
 
 /// Standard deviations of the bins' shared error that [`rms_bounds`] lets it move them by.
-const SHARED_SIGMAS: f64 = 2.0;
+pub const SHARED_SIGMAS: f64 = 2.0;
 
 /// The squared RMS of the bins' deviations from the law, each (deviation d_i, its passes'
 /// variance p_i, its shared error's components h_i, N), as (estimate, lower bound, upper
