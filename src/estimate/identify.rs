@@ -1742,10 +1742,19 @@ fn fit_regression(
             needed: 4 * diff.window(),
         });
     }
-    let x = diff.apply(&log.position_mm, dt, sg::POSITION);
-    let xd = diff.apply(&log.position_mm, dt, sg::VELOCITY);
-    let xdd = diff.apply(&log.position_mm, dt, sg::ACCELERATION);
-    let motion = diff.apply(&log.position_mm, dt, sg::MOTION_VELOCITY);
+    let [x, xd, xdd, motion]: [Vec<f64>; 4] = diff
+        .apply_each(
+            &log.position_mm,
+            dt,
+            &[
+                sg::POSITION,
+                sg::VELOCITY,
+                sg::ACCELERATION,
+                sg::MOTION_VELOCITY,
+            ],
+        )
+        .try_into()
+        .expect("one output per kernel");
     let n = x.len();
     let f = log.force_n[h..h + n].to_vec();
     // A position read in steps: each kernel's noise is what it passes of the steps' error at
