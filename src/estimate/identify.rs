@@ -844,7 +844,11 @@ type Active = [bool; 7];
 
 /// Model force and Jacobian row for parameters p = [m, d0, d1, d2, mu, F0, k2].
 fn model(p: &V7, r: &Rows, i: usize) -> (f64, V7) {
-    let at_row = (p[K2] * r.x[i]).exp();
+    model_at(p, r, i, (p[K2] * r.x[i]).exp())
+}
+
+/// [`model`] given the row's `at_row` = exp(k2 x).
+fn model_at(p: &V7, r: &Rows, i: usize, at_row: f64) -> (f64, V7) {
     let (xd, xd3, e, k2_column) = match &r.filtered {
         None => (
             r.xd[i],
@@ -874,7 +878,12 @@ fn model(p: &V7, r: &Rows, i: usize) -> (f64, V7) {
 
 /// Effective variance of a row's force residual at parameters p.
 fn row_variance(p: &V7, r: &Rows, i: usize) -> f64 {
-    let stiffness = p[K2] * p[MU] * (p[K2] * r.x[i]).exp();
+    row_variance_at(p, r, i, (p[K2] * r.x[i]).exp())
+}
+
+/// [`row_variance`] given the row's `at_row` = exp(k2 x).
+fn row_variance_at(p: &V7, r: &Rows, i: usize, at_row: f64) -> f64 {
+    let stiffness = p[K2] * p[MU] * at_row;
     let damping = p[D1] + 3.0 * p[D2] * r.xd[i] * r.xd[i];
     let var_xd = r.var_xd_at(i);
     let linear = r.var_f
@@ -961,13 +970,15 @@ fn row_correction(r: &Rows, i: usize, active: &Active) -> M7 {
 }
 
 /// The noise part C = sum_i w_i C_i of the normal matrix.
+/// The entries of the normal matrix [`row_correction`] can fill (the one below the diagonal
+/// is mirrored once the sums are done).
+const CORRECTED_ENTRIES: [(usize, usize); 4] = [(M, M), (D1, D1), (D1, D2), (D2, D2)];
+
 fn correction(r: &Rows, active: &Active, weights: &[f64]) -> M7 {
-    // Only the four entries row_correction can fill are summed.
-    const ENTRIES: [(usize, usize); 4] = [(M, M), (D1, D1), (D1, D2), (D2, D2)];
     let mut c = M7::zeros();
     for (i, &w) in weights.iter().enumerate() {
         let ci = row_correction(r, i, active);
-        for (a, b) in ENTRIES {
+        for (a, b) in CORRECTED_ENTRIES {
             c[(a, b)] += ci[(a, b)] * w;
         }
     }
@@ -1043,6 +1054,76 @@ fn objective(p: &V7, r: &Rows, weights: &[f64], c: &M7) -> f64 {
         chi2 += w * res * res;
     }
     chi2 - p.dot(&(c * p))
+}
+
+/// Gauss-Newton's sums at one point, from one pass over the rows ([`gauss_newton_pass`]).
+struct GaussNewtonPass {
+    /// [`weights_at`] the point.
+    weights: Vec<f64>,
+    /// [`correction`] at those weights.
+    c: M7,
+    /// [`normal_with`] at those weights: the corrected normal matrix,
+    jtj: M7,
+    /// right-hand side
+    jtr: V7,
+    /// and objective.
+    chi2: f64,
+    /// [`objective`] at the weights and noise part given, where they were.
+    chi2_given: Option<f64>,
+}
+
+/// [`weights_at`] `p`, then [`correction`] and [`normal_with`] at those weights, and
+/// [`objective`] at the weights and noise part `given` (the previous point's, which the line
+/// search compares against): one pass over the rows with exp(k2 x) taken once per row,
+/// where the functions apart take it three times. Each sum runs over the rows in the same
+/// order with the same operations as the functions apart, so the numbers are theirs to the
+/// last bit.
+fn gauss_newton_pass(
+    p: &V7,
+    r: &Rows,
+    active: &Active,
+    given: Option<(&[f64], &M7)>,
+) -> GaussNewtonPass {
+    let n = r.f.len();
+    let mut weights = Vec::with_capacity(n);
+    let mut c = M7::zeros();
+    let mut jtj = M7::zeros();
+    let mut jtr = V7::zeros();
+    let mut chi2 = 0.0;
+    let mut chi2_given = 0.0;
+    for i in 0..n {
+        let at_row = (p[K2] * r.x[i]).exp();
+        let w = 1.0 / row_variance_at(p, r, i, at_row).max(1e-300);
+        weights.push(w);
+        let ci = row_correction(r, i, active);
+        for (a, b) in CORRECTED_ENTRIES {
+            c[(a, b)] += ci[(a, b)] * w;
+        }
+        let (f, row) = model_at(p, r, i, at_row);
+        let res = r.f[i] - f;
+        if let Some((before, _)) = given {
+            chi2_given += before[i] * res * res;
+        }
+        let row = masked(row, active);
+        for b in 0..7 {
+            for a in 0..=b {
+                jtj[(a, b)] += row[a] * row[b] * w;
+            }
+        }
+        jtr += row * (w * res);
+        chi2 += w * res * res;
+    }
+    c[(D2, D1)] = c[(D1, D2)];
+    jtj.fill_lower_triangle_with_upper_triangle();
+    let cp = c * p;
+    GaussNewtonPass {
+        weights,
+        jtj: jtj - c,
+        jtr: jtr + cp,
+        chi2: chi2 - p.dot(&cp),
+        c,
+        chi2_given: given.map(|(_, c_given)| chi2_given - p.dot(&(c_given * p))),
+    }
 }
 
 /// Indices of the active parameters and the square roots of their diagonal entries.
@@ -1160,15 +1241,13 @@ fn gauss_newton(
     active: &mut Active,
     iterations: usize,
 ) -> Result<(V7, Vec<String>), IdentifyError> {
-    let mut weights = weights_at(&p, r);
-    let mut c = correction(r, active, &weights);
-    let (mut jtj, mut jtr, mut chi2) = normal_with(&p, r, active, &weights, &c);
+    let mut at = gauss_newton_pass(&p, r, active, None);
     let mut removed = Vec::new();
     for _ in 0..iterations {
-        let Some(dp) = solve(&jtj, &jtr, active) else {
+        let Some(dp) = solve(&at.jtj, &at.jtr, active) else {
             // A structural null direction first; otherwise the corrected matrix lost
             // definiteness through a noise-corrected column: m, then d2, then d1.
-            let mut dropped = prune(&(jtj + c), active);
+            let mut dropped = prune(&(at.jtj + at.c), active);
             if dropped.is_empty() {
                 if let Some(k) = NOISY_ORDER.into_iter().find(|&k| active[k]) {
                     active[k] = false;
@@ -1182,35 +1261,41 @@ fn gauss_newton(
             }
             removed.extend(dropped);
             drop_inactive(&mut p, active);
-            c = correction(r, active, &weights);
-            (jtj, jtr, chi2) = normal_with(&p, r, active, &weights, &c);
+            // The weights are kept; the noise part and the sums follow the active set.
+            at.c = correction(r, active, &at.weights);
+            (at.jtj, at.jtr, at.chi2) = normal_with(&p, r, active, &at.weights, &at.c);
             continue;
         };
         // Converged when the full step would lower chi-square by less than 1e-8: far below
         // any change in the estimates that their standard deviations could show.
-        if jtr.dot(&dp) < 1e-8 {
+        if at.jtr.dot(&dp) < 1e-8 {
             break;
         }
+        // The full step is judged from the pass that would follow it (usually taken);
+        // shorter ones from the objective alone.
         let mut step = 1.0;
         let mut improved = None;
         for _ in 0..40 {
             let trial = p + dp * step;
-            let c2 = objective(&trial, r, &weights, &c);
-            if c2.is_finite() && c2 <= chi2 {
-                improved = Some((trial, c2));
+            let (c2, next) = if step == 1.0 {
+                let next = gauss_newton_pass(&trial, r, active, Some((&at.weights, &at.c)));
+                (next.chi2_given.unwrap_or(f64::NAN), Some(next))
+            } else {
+                (objective(&trial, r, &at.weights, &at.c), None)
+            };
+            if c2.is_finite() && c2 <= at.chi2 {
+                improved = Some((trial, c2, next));
                 break;
             }
             step *= 0.5;
         }
         // No descent along the Gauss-Newton direction: at the minimum within rounding.
-        let Some((trial, c2)) = improved else {
+        let Some((trial, c2, next)) = improved else {
             break;
         };
-        let rel = (chi2 - c2) / chi2.max(1e-300);
+        let rel = (at.chi2 - c2) / at.chi2.max(1e-300);
         p = trial;
-        weights = weights_at(&p, r);
-        c = correction(r, active, &weights);
-        (jtj, jtr, chi2) = normal_with(&p, r, active, &weights, &c);
+        at = next.unwrap_or_else(|| gauss_newton_pass(&p, r, active, None));
         if rel < 1e-12 && step == 1.0 {
             break;
         }
