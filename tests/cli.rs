@@ -142,6 +142,41 @@ fn json_flag_prints_the_summary() {
 }
 
 #[test]
+fn json_to_writes_the_json_of_the_run_whose_text_is_printed() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = spec_path("ankle.toml");
+    let out = camspring(dir.path(), &["design", &spec, "--json-to", "summary.json"]);
+    assert_eq!(out.status.code(), Some(0));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(serde_json::from_str::<serde_json::Value>(&text).is_err());
+    assert!(text.contains("ankle"), "{text}");
+    let file = std::fs::read(dir.path().join("summary.json")).unwrap();
+    let json: serde_json::Value = serde_json::from_slice(&file).unwrap();
+    // 100 lbf at 0.5 in, converted to N and mm.
+    assert!((json["spec"]["law"]["fmax_n"].as_f64().unwrap() - 444.822_161_5).abs() < 1e-6);
+    // What --json prints, byte for byte.
+    let printed = camspring(dir.path(), &["design", &spec, "--json"]);
+    assert_eq!(printed.stdout, file);
+
+    // An error is written as --json prints it, with the error's exit code.
+    std::fs::write(dir.path().join("bad.toml"), "[law]\nfmax = \"-3 N\"\n").unwrap();
+    let bad = camspring(dir.path(), &["design", "bad.toml", "--json-to", "summary.json"]);
+    assert_eq!(bad.status.code(), Some(2));
+    let error: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("summary.json")).unwrap()).unwrap();
+    assert_eq!(error["error"]["kind"], "spec", "{error}");
+
+    // A file that cannot be written is exit code 3, and nothing is printed as if it were done.
+    std::fs::create_dir(dir.path().join("folder")).unwrap();
+    let unwritable = camspring(dir.path(), &["design", &spec, "--json-to", "folder"]);
+    assert_eq!(unwritable.status.code(), Some(3));
+    assert!(unwritable.stdout.is_empty());
+    assert!(String::from_utf8_lossy(&unwritable.stderr).contains("--json-to"));
+    let man = camspring(dir.path(), &["man", "--json-to", "x.json"]);
+    assert_eq!(man.status.code(), Some(2));
+}
+
+#[test]
 fn literal_paper_design_fails_its_checks_with_exit_one_and_still_writes() {
     let dir = tempfile::tempdir().unwrap();
     let out = camspring(

@@ -40,6 +40,15 @@ def camspring(*args):
     return subprocess.run([BIN, *map(str, args)], capture_output=True, text=True)
 
 
+def camspring_both(tmp, *args):
+    """One run read both ways: the process (its text on stdout) and the JSON report it wrote
+    with `--json-to`, parsed (None where none was written)."""
+    path = tmp / "report.json"
+    path.unlink(missing_ok=True)
+    run = camspring(*args, "--json-to", path)
+    return run, (json.loads(path.read_text()) if path.exists() else None)
+
+
 def spec(path, tr, k2_scale):
     path.write_text(
         f'name = "rig"\n[law]\nmu = "{tr.mu} N"\nk2 = "{tr.k2 * k2_scale} /mm"\nf0 = "{tr.f0} N"\n'

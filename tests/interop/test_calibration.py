@@ -17,7 +17,7 @@ import re
 import numpy as np
 import pytest
 
-from rig_matrix import KEYS, ROWS as MATRIX_ROWS, camspring, spec
+from rig_matrix import KEYS, ROWS as MATRIX_ROWS, camspring, camspring_both, spec
 from rig_sweep import draw, encoder_draw
 from rig_sim import Rig, Transmission, run, write_rig_log
 
@@ -210,13 +210,19 @@ def test_an_inertia_disagreement_does_not_say_which_is_off_and_keeps_the_spring_
 
 
 def identified_log(path, tr, rig, profile):
-    """A 300 s log of transmission `tr`, written with tabs, and `identify --json` of it (which
-    must succeed)."""
+    """A 300 s log of transmission `tr`, written with tabs, and identification's JSON of it
+    (which must succeed). Its text, from the same run, is kept for [`identify_text`]."""
     t, f, x, truth = run(tr, rig, profile, 300.0)
     write_rig_log(path, t, f, x, style="tab")
-    proc = camspring("identify", path, "--json")
+    proc, j = camspring_both(path.parent, "identify", path)
     assert proc.returncode == 0, proc.stderr
-    return path, json.loads(proc.stdout), truth
+    path.with_suffix(".identify.txt").write_text(proc.stdout)
+    return path, j, truth
+
+
+def identify_text(log):
+    """The text of the identification [`identified_log`] ran on `log`."""
+    return log.with_suffix(".identify.txt").read_text()
 
 
 def identified_rig_log(path, row, rig, profile):
@@ -283,9 +289,9 @@ def test_a_quantised_encoder_is_read_with_its_steps_and_honest_deviations(tmp_pa
     assert_every_estimate_within_three_sigma(j, truth)
     k2_rel_std = j["parameters"]["k2_per_mm_std"] / j["parameters"]["k2_per_mm"]
     assert k2_rel_std < 0.1, k2_rel_std
-    text = camspring("identify", log)
-    said = re.search(r"the encoder reads in steps of (\S+) mm", text.stdout)
-    assert said and abs(float(said.group(1)) / step - 1.0) < 1e-3, text.stdout
+    text = identify_text(log)
+    said = re.search(r"the encoder reads in steps of (\S+) mm", text)
+    assert said and abs(float(said.group(1)) / step - 1.0) < 1e-3, text
     est = camspring("estimate", log, "--json", "-o", tmp_path / "est.csv")
     assert est.returncode in (0, 1), est.stderr
 
@@ -310,7 +316,7 @@ def test_the_inertia_is_not_lifted_by_the_acceleration_filters_loss_of_gain(tmp_
     loss = j["inertia_attenuation"]
     if j["regression"] == "direct":
         assert loss is not None and 0.003 < loss < 0.03, loss
-        assert "loss of acceleration gain" in camspring("identify", log).stdout
+        assert "loss of acceleration gain" in identify_text(log)
     else:
         assert j["regression"] == "parallel-filter" and loss is None, j["regression"]
 
@@ -334,7 +340,7 @@ def test_a_good_encoder_on_sharp_moves_regresses_through_the_parallel_filter(tmp
     assert_every_estimate_within_three_sigma(j, truth)
     m = j["parameters"]["m_n_s2_per_mm"]
     assert m is not None and abs(m / truth["m"] - 1.0) < 0.01, m
-    assert "parallel filter" in camspring("identify", log).stdout
+    assert "parallel filter" in identify_text(log)
 
 
 def test_the_twins_move_smoothly_when_a_fine_encoder_lets_identification_use_a_short_window(tmp_path):
@@ -393,8 +399,17 @@ def test_validate_judges_a_servos_ramp_holds_without_their_transients(tmp_path, 
 
 
 def validate_json(tmp_path, tr, log, k2_scale):
-    proc = camspring("validate", spec(tmp_path / f"s{k2_scale}.toml", tr, k2_scale), log, "--tolerance", "3%", "--json")
-    return proc.returncode, json.loads(proc.stdout)
+    """`validate` of the law `tr` with k2 scaled by `k2_scale` at --tolerance 3%: its exit code
+    and JSON. Its text, from the same run, is kept for [`validate_text`]."""
+    proc, j = camspring_both(tmp_path, "validate", spec(tmp_path / f"s{k2_scale}.toml", tr, k2_scale), log,
+                             "--tolerance", "3%")
+    (tmp_path / f"s{k2_scale}.validate.txt").write_text(proc.stdout)
+    return proc.returncode, j
+
+
+def validate_text(tmp_path, k2_scale):
+    """The text of the last [`validate_json`] in `tmp_path` at `k2_scale`."""
+    return (tmp_path / f"s{k2_scale}.validate.txt").read_text()
 
 
 def test_a_pass_the_log_cannot_show_is_said_to_be_not_conclusive(tmp_path):
@@ -493,12 +508,11 @@ def test_a_spring_the_log_resolves_poorly_is_judged_with_its_deviation_and_not_s
     t, f, x, _ = run(tr, rig, "multisine", 300.0)
     log = tmp_path / "buried.tsv"
     write_rig_log(log, t, f, x, style="tab")
-    ident = camspring("identify", log, "--json")
-    p = json.loads(ident.stdout)["parameters"]
+    ident, j = camspring_both(tmp_path, "identify", log)
+    p = j["parameters"]
     k2, sd = p["k2_per_mm"], p["k2_per_mm_std"]
     assert abs(k2 - tr.k2) < 3 * sd and sd < 0.25 * tr.k2, (k2, sd)
-    text = camspring("identify", log).stdout
-    assert "k2_per_mm is determined only to" in text, text
+    assert "k2_per_mm is determined only to" in ident.stdout, ident.stdout
     rc, right = validate_json(tmp_path, tr, log, 1.0)
     k2c = next(c for c in right["criteria"] if c["name"] == "k2")
     assert k2c["pass"] and "not resolved" not in k2c["what"], k2c
@@ -868,9 +882,9 @@ def test_a_spring_identification_does_not_resolve_gets_no_filter_and_no_force_ve
         cov = next(c for c in v["criteria"] if c["name"] == "coverage")
         assert 65 < cov["deviation_percent"] < 70 and cov["tolerance_percent"] == 50, cov
         assert v["coverage"]["stroke_fraction"] < 0.35 and v["coverage"]["warnings"], v["coverage"]
-    text = camspring("validate", tmp_path / "s1.0.toml", log, "--tolerance", "3%")
-    assert text.returncode == 2 and text.stdout.startswith("NOT JUDGED"), text.stdout
-    assert "k2 is not resolved by this log" in text.stdout, text.stdout
+    text = validate_text(tmp_path, 1.0)
+    assert text.startswith("NOT JUDGED"), text
+    assert "k2 is not resolved by this log" in text, text
 
 
 def test_the_diagnosis_damper_is_not_pulled_along_its_line_by_the_velocitys_noise(tmp_path):
@@ -1119,14 +1133,14 @@ def test_a_force_read_late_is_fitted_and_re_timed(tmp_path, seed):
     def z(p, key, value):
         return (p[key] - value) / p[f"{key}_std"]
 
-    as_logged = json.loads(camspring("identify", log, "--json").stdout)
+    text, as_logged = camspring_both(tmp_path, "identify", log)
     plain = as_logged["parameters"]
     assert max(abs(plain[k] / v - 1.0) for k, v in truth[:2]) > 0.1, plain
     # Read as logged, the screen suspects the delay (within three of its standard deviations
     # of 15 ms) and the text says to fit it.
     screen = as_logged["force_delay_screen"]
     assert screen["suspected"] and abs(screen["delay_s"] - 0.015) < 3.0 * screen["std_s"], screen
-    text = camspring("identify", log).stdout
+    text = text.stdout
     assert "WARNING: the force looks read" in text and "--force-delay auto" in text, text
     auto = camspring("identify", log, "--json", "--force-delay", "auto")
     assert auto.returncode == 0, auto.stderr
@@ -1150,9 +1164,10 @@ def test_a_log_read_together_is_not_suspected_of_a_force_delay(tmp_path, seed):
     identification (`force_delay_screen`) puts the delay within three of its standard
     deviations of zero, suspects none, and the text says so without a warning."""
     log = late_log(tmp_path, Transmission(m=0.05, d0=0.0, d1=0.2, d2=-1e-4), seed, 0)
-    screen = json.loads(camspring("identify", log, "--json").stdout)["force_delay_screen"]
+    proc, j = camspring_both(tmp_path, "identify", log)
+    screen = j["force_delay_screen"]
     assert not screen["suspected"] and abs(screen["delay_s"]) < 3.0 * screen["std_s"], screen
-    text = camspring("identify", log).stdout
+    text = proc.stdout
     assert "read together as far as the fit tells" in text and "WARNING: the force" not in text, text
 
 
@@ -1169,9 +1184,10 @@ def test_a_delay_that_moves_with_the_filter_window_is_not_warned(tmp_path, i):
     and +5.0 ms (z +1.3). Not suspected now, and where the held window's least is
     significant the text says it moved with the window."""
     _, log = sweep_log(tmp_path, i)
-    screen = json.loads(camspring("identify", log, "--json").stdout)["force_delay_screen"]
+    proc, j = camspring_both(tmp_path, "identify", log)
+    screen = j["force_delay_screen"]
     assert not screen["suspected"], screen
-    text = camspring("identify", log).stdout
+    text = proc.stdout
     assert "WARNING: the force" not in text, text
     if screen["significant"]:
         assert "misfit trading with the delay" in text, text
@@ -1247,14 +1263,13 @@ def test_a_negative_damping_with_a_rising_spring_blames_neither_sensor(tmp_path,
     and d1 within three of its own."""
     tr = Transmission(m=0.002, d0=0.0, d1=0.05, d2=0.0)
     log = late_log(tmp_path, tr, seed, 80)
-    r = camspring("identify", log, "--json")
+    r, j = camspring_both(tmp_path, "identify", log)
     assert r.returncode == 1, r.stderr
-    j = json.loads(r.stdout)
     assert j["fit"]["status"] == "does-not-fit", j["fit"]
     assert j["sign_fault"]["likely"] == "neither", j["sign_fault"]
     assert "a negative damping d1" in j["sign_fault"]["found"], j["sign_fault"]
     assert j["parameters"]["d1_n_s_per_mm"] < -5.0 * j["parameters"]["d1_n_s_per_mm_std"], j["parameters"]
-    text = camspring("identify", log).stdout
+    text = r.stdout
     assert "neither sensor reads reversed" in text and "--force-delay auto" in text, text
     e = camspring("estimate", log, "-o", tmp_path / "est.csv")
     assert e.returncode == 2 and "neither sensor reads reversed" in e.stderr, e.stderr
@@ -1320,11 +1335,14 @@ def test_estimate_validate_and_diagnose_re_time_a_force_read_late(tmp_path):
     assert vj["force_delay_screen"] is None, vj["force_delay_screen"]
 
     def diagnose(*extra):
-        r = camspring("diagnose", law, log, "--json", *extra)
+        r, j = camspring_both(tmp_path, "diagnose", law, log, *extra)
         assert r.returncode == 0, r.stderr + r.stdout[-2000:]
-        return json.loads(r.stdout)
+        (tmp_path / "diagnose.txt").write_text(r.stdout)
+        return j
 
-    before, after = diagnose(), diagnose("--force-delay", "auto")
+    before = diagnose()
+    before_text = (tmp_path / "diagnose.txt").read_text()
+    after = diagnose("--force-delay", "auto")
     assert after["force_delay"]["fitted"], after["force_delay"]
     # The fitted delay's standard deviation is in the build's: diagnosed with the delay given
     # at its value and one standard deviation either side, each parameter's deviation with
@@ -1345,8 +1363,7 @@ def test_estimate_validate_and_diagnose_re_time_a_force_read_late(tmp_path):
     screen = before["force_delay_screen"]
     assert screen["suspected"] and abs(screen["delay_s"] - 0.015) < 3.0 * screen["std_s"], screen
     assert after["force_delay_screen"] is None, after["force_delay_screen"]
-    text = camspring("diagnose", law, log)
-    assert "WARNING: the force looks read" in text.stdout and "--force-delay auto" in text.stdout, text.stdout
+    assert "WARNING: the force looks read" in before_text and "--force-delay auto" in before_text, before_text
     r = camspring("revise", law, log, "--json", "-o", tmp_path / "rev")
     assert r.returncode in (0, 1), r.stderr + r.stdout[-2000:]
     assert json.loads(r.stdout)["diagnosis"]["force_delay_screen"]["suspected"], r.stdout[-2000:]

@@ -31,6 +31,11 @@ More: README.md, docs/SPEC.md, docs/CALIBRATION.md, docs/JSON.md, `camspring <co
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
+    /// Also write the JSON report (what --json prints) to FILE, replaced whole, while the
+    /// text goes to stdout: one run read both ways. An error is written there as --json
+    /// prints it. Not for `completions` and `man`, which have no report.
+    #[arg(long, global = true, value_name = "FILE")]
+    pub json_to: Option<PathBuf>,
 }
 
 /// The commands, in workflow order: design first, then the other design-side commands, then

@@ -67,9 +67,10 @@ impl Report {
 }
 
 /// Prints a report (its text, or its JSON with `--json`) or an error, and returns the exit
-/// code. A closed pipe (`camspring ... | head`) ends quietly; any other failure to write
-/// stdout is exit code 3.
-fn emit(result: Result<Report, Error>, json: bool) -> ExitCode {
+/// code; with `--json-to FILE` the JSON (the error's too) is also written to FILE first. A
+/// closed pipe (`camspring ... | head`) ends quietly; any other failure to write stdout, or
+/// FILE, is exit code 3.
+fn emit(result: Result<Report, Error>, json: bool, json_to: Option<&Path>) -> ExitCode {
     let report = match result {
         Ok(r) => r,
         Err(e) => {
@@ -81,19 +82,29 @@ fn emit(result: Result<Report, Error>, json: bool) -> ExitCode {
             // Every message already carries its cause (key, line, OS error).
             let message = sanitize(&e.to_string());
             eprintln!("error: {message}");
+            let mut error = json!({ "kind": e.kind(), "message": message });
+            if let Some(key) = e.key() {
+                error["key"] = json!(key);
+            }
+            if let Some(line) = e.line() {
+                error["line"] = json!(line);
+            }
+            if let Some(path) = json_to {
+                if !write_json_to(path, &json_error_text(&error)) {
+                    return ExitCode::from(EXIT_IO);
+                }
+            }
             if json {
-                let mut error = json!({ "kind": e.kind(), "message": message });
-                if let Some(key) = e.key() {
-                    error["key"] = json!(key);
-                }
-                if let Some(line) = e.line() {
-                    error["line"] = json!(line);
-                }
                 return print_json_error(error, code);
             }
             return ExitCode::from(code);
         }
     };
+    if let Some(path) = json_to {
+        if !write_json_to(path, &report.json) {
+            return ExitCode::from(EXIT_IO);
+        }
+    }
     let text = if json {
         report.json + "\n"
     } else if report.coloured {
@@ -122,9 +133,30 @@ fn sanitize(message: &str) -> String {
         .join("\n")
 }
 
+/// Writes a JSON report to the `--json-to` file (with a final line break), replacing it
+/// whole; false (the message printed) where it cannot be written.
+fn write_json_to(path: &Path, json: &str) -> bool {
+    match camspring::export::write_atomic(path, format!("{json}\n").as_bytes()) {
+        Ok(()) => true,
+        Err(e) => {
+            eprintln!(
+                "error: --json-to {}: {}",
+                sanitize(&path.display().to_string()),
+                sanitize(&e.to_string())
+            );
+            false
+        }
+    }
+}
+
+/// `{"error": {...}}`, as `--json` prints an error.
+fn json_error_text(error: &serde_json::Value) -> String {
+    serde_json::to_string_pretty(&json!({ "error": error })).unwrap_or_default()
+}
+
 /// `{"error": {...}}` on stdout, for `--json`; the exit code stays the error's.
 fn print_json_error(error: serde_json::Value, code: u8) -> ExitCode {
-    let text = serde_json::to_string_pretty(&json!({ "error": error })).unwrap_or_default();
+    let text = json_error_text(&error);
     match writeln!(std::io::stdout().lock(), "{text}") {
         Ok(()) => ExitCode::from(code),
         Err(_) => ExitCode::from(EXIT_IO),
@@ -325,6 +357,17 @@ fn main() -> ExitCode {
         Ok(cli) => cli,
         Err(code) => return code,
     };
+    let json_to = cli.json_to.clone();
+    if json_to.is_some()
+        && matches!(
+            cli.command,
+            Command::Completions { .. } | Command::Man { .. }
+        )
+    {
+        eprintln!("error: --json-to: `completions` and `man` have no JSON report");
+        return ExitCode::from(EXIT_BAD_INPUT);
+    }
+    let emit = |result: Result<Report, Error>, json: bool| emit(result, json, json_to.as_deref());
     match cli.command {
         Command::Design { spec, out, json } => emit(
             run_design(spec.as_deref(), out.as_deref()).and_then(|run| {
