@@ -160,7 +160,10 @@ fn json_to_writes_the_json_of_the_run_whose_text_is_printed() {
 
     // An error is written as --json prints it, with the error's exit code.
     std::fs::write(dir.path().join("bad.toml"), "[law]\nfmax = \"-3 N\"\n").unwrap();
-    let bad = camspring(dir.path(), &["design", "bad.toml", "--json-to", "summary.json"]);
+    let bad = camspring(
+        dir.path(),
+        &["design", "bad.toml", "--json-to", "summary.json"],
+    );
     assert_eq!(bad.status.code(), Some(2));
     let error: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.path().join("summary.json")).unwrap()).unwrap();
