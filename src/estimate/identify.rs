@@ -1068,29 +1068,19 @@ struct GaussNewtonPass {
     jtr: V7,
     /// and objective.
     chi2: f64,
-    /// [`objective`] at the weights and noise part given, where they were.
-    chi2_given: Option<f64>,
 }
 
-/// [`weights_at`] `p`, then [`correction`] and [`normal_with`] at those weights, and
-/// [`objective`] at the weights and noise part `given` (the previous point's, which the line
-/// search compares against): one pass over the rows with exp(k2 x) taken once per row,
-/// where the functions apart take it three times. Each sum runs over the rows in the same
-/// order with the same operations as the functions apart, so the numbers are theirs to the
-/// last bit.
-fn gauss_newton_pass(
-    p: &V7,
-    r: &Rows,
-    active: &Active,
-    given: Option<(&[f64], &M7)>,
-) -> GaussNewtonPass {
+/// [`weights_at`] `p`, then [`correction`] and [`normal_with`] at those weights: one pass
+/// over the rows with exp(k2 x) taken once per row, where the functions apart take it twice.
+/// Each sum runs over the rows in the same order with the same operations as the functions
+/// apart, so the numbers are theirs to the last bit.
+fn gauss_newton_pass(p: &V7, r: &Rows, active: &Active) -> GaussNewtonPass {
     let n = r.f.len();
     let mut weights = Vec::with_capacity(n);
     let mut c = M7::zeros();
     let mut jtj = M7::zeros();
     let mut jtr = V7::zeros();
     let mut chi2 = 0.0;
-    let mut chi2_given = 0.0;
     for i in 0..n {
         let at_row = (p[K2] * r.x[i]).exp();
         let w = 1.0 / row_variance_at(p, r, i, at_row).max(1e-300);
@@ -1101,9 +1091,6 @@ fn gauss_newton_pass(
         }
         let (f, row) = model_at(p, r, i, at_row);
         let res = r.f[i] - f;
-        if let Some((before, _)) = given {
-            chi2_given += before[i] * res * res;
-        }
         let row = masked(row, active);
         for b in 0..7 {
             for a in 0..=b {
@@ -1122,7 +1109,6 @@ fn gauss_newton_pass(
         jtr: jtr + cp,
         chi2: chi2 - p.dot(&cp),
         c,
-        chi2_given: given.map(|(_, c_given)| chi2_given - p.dot(&(c_given * p))),
     }
 }
 
@@ -1241,7 +1227,7 @@ fn gauss_newton(
     active: &mut Active,
     iterations: usize,
 ) -> Result<(V7, Vec<String>), IdentifyError> {
-    let mut at = gauss_newton_pass(&p, r, active, None);
+    let mut at = gauss_newton_pass(&p, r, active);
     let mut removed = Vec::new();
     for _ in 0..iterations {
         let Some(dp) = solve(&at.jtj, &at.jtr, active) else {
@@ -1271,31 +1257,26 @@ fn gauss_newton(
         if at.jtr.dot(&dp) < 1e-8 {
             break;
         }
-        // The full step is judged from the pass that would follow it (usually taken);
-        // shorter ones from the objective alone.
+        // Steps are judged by the objective alone (a pass's sums would be lost on a step not
+        // taken: a sticking rod's fits halve the step often).
         let mut step = 1.0;
         let mut improved = None;
         for _ in 0..40 {
             let trial = p + dp * step;
-            let (c2, next) = if step == 1.0 {
-                let next = gauss_newton_pass(&trial, r, active, Some((&at.weights, &at.c)));
-                (next.chi2_given.unwrap_or(f64::NAN), Some(next))
-            } else {
-                (objective(&trial, r, &at.weights, &at.c), None)
-            };
+            let c2 = objective(&trial, r, &at.weights, &at.c);
             if c2.is_finite() && c2 <= at.chi2 {
-                improved = Some((trial, c2, next));
+                improved = Some((trial, c2));
                 break;
             }
             step *= 0.5;
         }
         // No descent along the Gauss-Newton direction: at the minimum within rounding.
-        let Some((trial, c2, next)) = improved else {
+        let Some((trial, c2)) = improved else {
             break;
         };
         let rel = (at.chi2 - c2) / at.chi2.max(1e-300);
         p = trial;
-        at = next.unwrap_or_else(|| gauss_newton_pass(&p, r, active, None));
+        at = gauss_newton_pass(&p, r, active);
         if rel < 1e-12 && step == 1.0 {
             break;
         }
