@@ -969,11 +969,11 @@ fn row_correction(r: &Rows, i: usize, active: &Active) -> M7 {
     c
 }
 
-/// The noise part C = sum_i w_i C_i of the normal matrix.
 /// The entries of the normal matrix [`row_correction`] can fill (the one below the diagonal
 /// is mirrored once the sums are done).
 const CORRECTED_ENTRIES: [(usize, usize); 4] = [(M, M), (D1, D1), (D1, D2), (D2, D2)];
 
+/// The noise part C = sum_i w_i C_i of the normal matrix.
 fn correction(r: &Rows, active: &Active, weights: &[f64]) -> M7 {
     let mut c = M7::zeros();
     for (i, &w) in weights.iter().enumerate() {
@@ -1062,11 +1062,11 @@ struct GaussNewtonPass {
     weights: Vec<f64>,
     /// [`correction`] at those weights.
     c: M7,
-    /// [`normal_with`] at those weights: the corrected normal matrix,
+    /// The corrected normal matrix of [`normal_with`] at those weights.
     jtj: M7,
-    /// right-hand side
+    /// Its right-hand side.
     jtr: V7,
-    /// and objective.
+    /// Its corrected objective.
     chi2: f64,
 }
 
