@@ -32,8 +32,9 @@ pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
     /// Also write the JSON report (what --json prints) to FILE, replaced whole, while the
-    /// text goes to stdout: one run read both ways. An error is written there as --json
-    /// prints it. Not for `completions` and `man`, which have no report.
+    /// text goes to stdout: one run read both ways. The command's error is written there as
+    /// --json prints it (not a usage error, found before the options are read). Not for
+    /// `completions` and `man`, which have no report.
     #[arg(long, global = true, value_name = "FILE")]
     pub json_to: Option<PathBuf>,
 }
