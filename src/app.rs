@@ -314,6 +314,9 @@ pub fn read_log_file(
         b.finish_and_clear();
     }
     let log = result.map_err(|e| log_error(path, e))?;
+    if let Some(n) = recognised_note(&log.recognised) {
+        eprintln!("note: {}: {n}", path.display());
+    }
     if let Some(n) = units_row_note(log.units_row.as_ref()) {
         eprintln!("note: {}: {n}", path.display());
     }
@@ -332,6 +335,47 @@ fn reading_bar(path: &Path, size: u64) -> Option<indicatif::ProgressBar> {
     )?;
     bar.set_message(path.display().to_string());
     Some(bar)
+}
+
+/// The note for columns read by their names, the header lacking the default ones: each
+/// column, the quantity it is read as and its unit.
+pub fn recognised_note(columns: &[crate::estimate::log::RecognisedColumn]) -> Option<String> {
+    if columns.is_empty() {
+        return None;
+    }
+    let defaults = crate::estimate::log::ColumnMap::default();
+    let default_name = |quantity: &str| match quantity {
+        "time" => defaults.time.name.clone(),
+        "force" => defaults.force.name.clone(),
+        _ => defaults.position.name.clone(),
+    };
+    let missing: Vec<String> = columns.iter().map(|c| default_name(c.quantity)).collect();
+    let missing = match missing.split_last() {
+        Some((last, rest)) if !rest.is_empty() => format!("{} or {last}", rest.join(", ")),
+        _ => missing.concat(),
+    };
+    let read: Vec<String> = columns
+        .iter()
+        .map(|c| {
+            format!(
+                "{} from \"{}\" in {}{}",
+                c.quantity,
+                c.name,
+                c.unit,
+                if c.from_units_row {
+                    " (the units row's)"
+                } else {
+                    ""
+                }
+            )
+        })
+        .collect();
+    Some(format!(
+        "the header has no {}; read by the column names: {} (--time, --force and --position \
+         map other columns)",
+        missing,
+        read.join(", ")
+    ))
 }
 
 /// The note for a units row under a log's header: its line and the units read.
@@ -750,6 +794,9 @@ pub fn survey_log_file(
         b.finish_and_clear();
     }
     let surveyed = surveyed.map_err(|e| log_error(log_path, e))?;
+    if let Some(n) = recognised_note(reader.recognised()) {
+        eprintln!("note: {}: {n}", log_path.display());
+    }
     if let Some(n) = units_row_note(reader.units_row()) {
         eprintln!("note: {}: {n}", log_path.display());
     }

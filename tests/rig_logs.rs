@@ -571,40 +571,113 @@ fn a_utf16_log_as_windows_tools_write_it_reads_the_same_samples() {
 }
 
 #[test]
-fn a_missing_column_message_gives_the_option_for_the_column_that_reads_as_it() {
+fn columns_whose_names_carry_their_units_are_read_by_their_names() {
     let text = base_log();
+    let reference = read(&text).unwrap();
     let body = text.split_once('\n').unwrap().1;
-    let err = read(&format!("Time [ms],Force (N),x_in\n{body}"))
-        .unwrap_err()
-        .to_string();
-    assert!(err.contains("--time \"Time [ms]:ms\""), "{err}");
-    let err = read(&format!("t_s,load,x_in\n{body}"))
-        .unwrap_err()
-        .to_string();
-    assert!(err.contains("--force \"load:UNIT\""), "{err}");
-    let err = read(&format!("t_s,force_n,x_in\n{body}"))
-        .unwrap_err()
-        .to_string();
-    assert!(err.contains("--position \"x_in:in\""), "{err}");
-    // The options the hint gives read the log: time in ms, position in inches.
+    let values = |l: &str| -> Vec<f64> { l.split(',').map(|f| f.parse().unwrap()).collect() };
+    // Time in ms and position in inches, the units in the names.
     let scaled: String = body
         .lines()
         .map(|l| {
-            let v: Vec<f64> = l.split(',').map(|f| f.parse().unwrap()).collect();
+            let v = values(l);
             format!("{},{},{}\n", v[0] * 1000.0, v[1], v[2] / 25.4)
         })
         .collect();
+    let log = read(&format!("Time [ms],Force (N),x_in\n{scaled}")).unwrap();
+    assert_eq!(log.len(), reference.len());
+    assert!((log.t_s[500] - reference.t_s[500]).abs() < 1e-9);
+    assert!((log.position_mm[500] - reference.position_mm[500]).abs() < 1e-6);
+    assert!((log.force_n[500] - reference.force_n[500]).abs() < 1e-9);
+    let read_as: Vec<(&str, &str, &str)> = log
+        .recognised
+        .iter()
+        .map(|c| (c.quantity, c.name.as_str(), c.unit.as_str()))
+        .collect();
+    assert_eq!(
+        read_as,
+        [
+            ("time", "Time [ms]", "ms"),
+            ("force", "Force (N)", "N"),
+            ("position", "x_in", "in")
+        ]
+    );
+    // The options that map them read the same samples, and nothing is read by its name.
     let map = common::column_map("Time [ms]:ms", "Force (N):N", "x_in:in");
-    let log = read_log(
+    let mapped = read_log(
         format!("Time [ms],Force (N),x_in\n{scaled}").as_bytes(),
         &map,
         0.1,
         |_| {},
     )
     .unwrap();
-    let reference = read(&text).unwrap();
-    assert!((log.t_s[500] - reference.t_s[500]).abs() < 1e-9);
-    assert!((log.position_mm[500] - reference.position_mm[500]).abs() < 1e-6);
+    assert_eq!(mapped.position_mm, log.position_mm);
+    assert!(mapped.recognised.is_empty());
+    // The command says what it read each column as.
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("rig.csv"),
+        format!("Time [ms],Force (N),x_in\n{scaled}"),
+    )
+    .unwrap();
+    let out = camspring(dir.path(), &["noise", "rig.csv"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert!(
+        stderr.contains("the header has no t_s, force_n or position_mm")
+            && stderr.contains("time from \"Time [ms]\" in ms")
+            && stderr.contains("position from \"x_in\" in in"),
+        "{stderr}"
+    );
+    // A tensile tester's export: names without units and a units row under them, in another
+    // order, quoted, the force in kN.
+    let tester: String = body
+        .lines()
+        .map(|l| {
+            let v = values(l);
+            format!("\"{}\",\"{}\",\"{}\"\n", v[0], v[2], v[1] / 1000.0)
+        })
+        .collect();
+    let log = read(&format!(
+        "\"Time\",\"Extension\",\"Load\"\n\"(sec)\",\"(mm)\",\"(kN)\"\n{tester}"
+    ))
+    .unwrap();
+    assert!((log.force_n[700] - reference.force_n[700]).abs() < 1e-9);
+    assert!((log.position_mm[700] - reference.position_mm[700]).abs() < 1e-9);
+    assert!(log.recognised.iter().all(|c| c.from_units_row));
+    assert_eq!(log.recognised[1].unit, "kN");
+}
+
+#[test]
+fn a_missing_column_message_gives_the_option_for_the_column_that_reads_as_it() {
+    let text = base_log();
+    let body = text.split_once('\n').unwrap().1;
+    // A name without a unit and no units row: not read in a guessed unit.
+    let err = read(&format!("t_s,load,x_in\n{body}")).unwrap_err();
+    assert_eq!(err.line(), Some(1), "{err}");
+    assert!(err.to_string().contains("--force \"load:UNIT\""), "{err}");
+    // Two columns that read as force: neither is taken.
+    let four: String = body
+        .lines()
+        .map(|l| {
+            let v: Vec<&str> = l.split(',').collect();
+            format!("{},0,{},{}\n", v[0], v[1], v[2])
+        })
+        .collect();
+    let err = read(&format!(
+        "time [s],force setpoint [N],force [N],position [mm]\n{four}"
+    ))
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("no column \"force_n\"") && err.contains("give --force NAME:UNIT"),
+        "{err}"
+    );
+    // A name with a unit of another quantity is not read as this one.
+    let err = read(&format!("t_s,force_n,x [N]\n{body}"))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("--position \"x [N]:UNIT\""), "{err}");
 }
 
 #[test]

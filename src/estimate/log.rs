@@ -327,9 +327,11 @@ fn unit_in_name(tokens: &[&str], dim: Dimension) -> Option<&'static str> {
         .find_map(|t| unit_of(t, dim).map(|(u, _)| u))
 }
 
-/// A hint for a missing column: the header's column whose name reads as the quantity (`time`,
-/// `Force [N]`, `x_in`), and the option that maps it, with the unit its name carries.
-fn column_hint(what: &str, columns: &[String]) -> String {
+/// The header's columns whose names read as a quantity (`time`, `force` or `position`): the
+/// first word of the name is one of the quantity's (`Time [ms]`, `Load (N)`, `x_in`,
+/// `Extension (mm)`), each with the unit its name carries, when it carries one of the
+/// quantity's.
+fn reading_as<'a>(what: &str, columns: &'a [String]) -> Vec<(&'a String, Option<&'static str>)> {
     let (dim, words): (Dimension, &[&str]) = match what {
         "time" => (Dimension::Time, &["t", "time", "timestamp", "elapsed"]),
         "force" => (Dimension::Force, &["f", "force", "load", "fz"]),
@@ -343,10 +345,12 @@ fn column_hint(what: &str, columns: &[String]) -> String {
                 "deflection",
                 "stroke",
                 "travel",
+                "extension",
+                "elongation",
             ],
         ),
     };
-    let matching: Vec<(&String, Option<&str>)> = columns
+    columns
         .iter()
         .filter(|c| !c.contains(':'))
         .filter_map(|c| {
@@ -359,8 +363,18 @@ fn column_hint(what: &str, columns: &[String]) -> String {
                 .contains(&first.as_str())
                 .then(|| (c, unit_in_name(&tokens[1..], dim)))
         })
-        .collect();
-    match matching.as_slice() {
+        .collect()
+}
+
+/// A hint for a missing column: the header's column whose name reads as the quantity, and the
+/// option that maps it, with the unit its name carries.
+fn column_hint(what: &str, columns: &[String]) -> String {
+    let dim = match what {
+        "time" => Dimension::Time,
+        "force" => Dimension::Force,
+        _ => Dimension::Length,
+    };
+    match reading_as(what, columns).as_slice() {
         [(name, Some(unit))] => {
             format!("; \"{name}\" reads as the {what} in {unit}: give --{what} \"{name}:{unit}\"")
         }
@@ -664,6 +678,26 @@ pub struct CalibrationLog {
     /// The units row under the header, when the log had one ([`LogReader::units_row`]).
     #[serde(skip)]
     pub units_row: Option<(u64, [String; 3])>,
+    /// Columns read by their names, the header lacking the default ones
+    /// ([`LogReader::recognised`]).
+    #[serde(skip)]
+    pub recognised: Vec<RecognisedColumn>,
+}
+
+/// A column the reader took for a quantity by its name, the header lacking the column the map
+/// names for it by default (`t_s`, `force_n`, `position_mm`): the one column whose name reads
+/// as that quantity (`Time [ms]`, `Load (kN)`, `Extension (mm)`), in the unit its name carries
+/// or, for a name that carries none (`Time`), the unit of a units row under the header.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RecognisedColumn {
+    /// `time`, `force` or `position`.
+    pub quantity: &'static str,
+    /// The column's name in the header.
+    pub name: String,
+    /// The unit it is read in.
+    pub unit: String,
+    /// Whether the unit came from a units row rather than the name.
+    pub from_units_row: bool,
 }
 
 impl CalibrationLog {
@@ -869,6 +903,11 @@ pub struct LogReader<R: Read> {
     units_checked: bool,
     /// A units row under the header: its line and the units it gives time, force and position.
     units_row: Option<(u64, [String; 3])>,
+    /// Columns read by their names ([`LogReader::recognised`]).
+    recognised: Vec<RecognisedColumn>,
+    /// For a column read by a name that carries no unit: the missing column's error, raised
+    /// when no units row gives the unit.
+    unit_pending: Option<LogError>,
     /// Rows with no value since the last complete one: their lines (the first few) and count.
     empty: (Vec<u64>, usize),
     /// Rows with no value before the first complete row or after the last: not filled.
@@ -982,6 +1021,53 @@ impl<R: Read> LogReader<R> {
             .map_err(|e| LogError::Io(format!("line {header_line}: {e}")))?
             .clone();
         let columns: Vec<String> = header.iter().map(|h| h.trim().to_string()).collect();
+        // A column left at its default name that the header lacks is the header's one column
+        // whose name reads as the quantity, in the unit the name carries (or, for a name that
+        // carries none, a units row's: refused when there is no units row).
+        let defaults = ColumnMap::default();
+        let mut map = map.clone();
+        let mut recognised = Vec::new();
+        let mut unit_pending = None;
+        for (what, dim) in [
+            ("time", Dimension::Time),
+            ("force", Dimension::Force),
+            ("position", Dimension::Length),
+        ] {
+            let (column, default) = match what {
+                "time" => (&mut map.time, &defaults.time),
+                "force" => (&mut map.force, &defaults.force),
+                _ => (&mut map.position, &defaults.position),
+            };
+            if column != default || columns.contains(&column.name) {
+                continue;
+            }
+            let [(name, unit)] = reading_as(what, &columns)[..] else {
+                continue;
+            };
+            if unit.is_none() && unit_pending.is_none() {
+                unit_pending = Some(LogError::MissingColumn {
+                    line: header_line,
+                    name: column.name.clone(),
+                    what,
+                    header: header_str.trim_end().to_string(),
+                    columns: columns.clone(),
+                    delimiter: separator.name(),
+                });
+            }
+            *column = Column {
+                name: name.clone(),
+                factor: unit
+                    .and_then(|u| unit_of(u, dim))
+                    .map_or(1.0, |(_, factor)| factor),
+            };
+            recognised.push(RecognisedColumn {
+                quantity: what,
+                name: name.clone(),
+                unit: unit.unwrap_or(dim.units()[0].0).to_string(),
+                from_units_row: unit.is_none(),
+            });
+        }
+        let map = &map;
         let find = |c: &Column, what: &'static str| {
             let count = columns.iter().filter(|h| **h == c.name).count();
             if count > 1 {
@@ -1043,6 +1129,8 @@ impl<R: Read> LogReader<R> {
             clock: Clock::default(),
             units_checked: false,
             units_row: None,
+            recognised,
+            unit_pending,
             empty: (Vec::new(), 0),
             left_out: Vec::new(),
             left_out_count: 0,
@@ -1057,6 +1145,13 @@ impl<R: Read> LogReader<R> {
     /// default unit (s, N, mm) is read in the row's; one given another unit keeps it.
     pub fn units_row(&self) -> Option<&(u64, [String; 3])> {
         self.units_row.as_ref()
+    }
+
+    /// The columns read by their names: where the header lacks a column the map names by its
+    /// default (`t_s`, `force_n`, `position_mm`) and exactly one of its columns reads as that
+    /// quantity ([`RecognisedColumn`]). Empty when every column was found as mapped.
+    pub fn recognised(&self) -> &[RecognisedColumn] {
+        &self.recognised
     }
 
     /// Dropped samples filled in so far.
@@ -1089,7 +1184,13 @@ impl<R: Read> LogReader<R> {
     /// `Ok(false)` at the end of the file.
     fn read_next(&mut self) -> Result<bool, LogError> {
         match self.rdr.read_record(&mut self.record) {
-            Ok(false) => return Ok(false),
+            Ok(false) => {
+                // A column read by a name without a unit, and no units row to give it one.
+                if let Some(e) = self.unit_pending.take() {
+                    return Err(e);
+                }
+                return Ok(false);
+            }
             Ok(true) => {}
             Err(e) => {
                 let line = e.position().map_or(0, |p| p.line()) + self.offset;
@@ -1131,8 +1232,19 @@ impl<R: Read> LogReader<R> {
                         self.factors[k] = *factor;
                     }
                 }
+                for r in self.recognised.iter_mut().filter(|r| r.from_units_row) {
+                    let k = ["time", "force", "position"]
+                        .iter()
+                        .position(|q| *q == r.quantity)
+                        .unwrap_or(0);
+                    r.unit = units[k].0.clone();
+                }
+                self.unit_pending = None;
                 self.units_row = Some((line, units.map(|(u, _)| u)));
                 return Ok(true);
+            }
+            if let Some(e) = self.unit_pending.take() {
+                return Err(e);
             }
         }
         let mut v = [0.0; 3];
@@ -1412,6 +1524,7 @@ pub fn collect_log<R: Read>(
     }
     log.left_out = (reader.left_out().to_vec(), reader.left_out_count());
     log.units_row = reader.units_row().cloned();
+    log.recognised = reader.recognised.clone();
     log.filled = reader.filled;
     Ok(log)
 }

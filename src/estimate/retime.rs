@@ -930,7 +930,7 @@ where
 }
 
 /// `log` with its force re-timed by `delay` rows ([`ForceRetimer`]); the filled gaps, rows
-/// left out and units row are kept as read.
+/// left out, units row and columns read by their names are kept as read.
 pub fn retime_log(log: &CalibrationLog, delay: RowDelay) -> CalibrationLog {
     let samples = (0..log.len()).map(|i| {
         Ok(Sample {
@@ -943,6 +943,7 @@ pub fn retime_log(log: &CalibrationLog, delay: RowDelay) -> CalibrationLog {
         filled: log.filled.clone(),
         left_out: log.left_out.clone(),
         units_row: log.units_row.clone(),
+        recognised: log.recognised.clone(),
         ..CalibrationLog::default()
     };
     for s in ForceRetimer::new(samples, delay).flatten() {

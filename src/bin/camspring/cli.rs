@@ -578,13 +578,18 @@ fn position_offset(text: &str) -> Result<PositionOffset, String> {
 /// Column mapping of a calibration log.
 #[derive(clap::Args, Debug)]
 pub struct Columns {
-    /// Time column and unit (s, ms, us, min, h).
+    /// Time column and unit (s, ms, us, min, h). Where the header has no t_s, the one column
+    /// whose name reads as time with its unit ("Time [ms]") is read, and a note says so.
     #[arg(long, default_value = "t_s")]
     pub time: String,
-    /// Force column and unit (N, kN, lbf); a minus sign reads it reversed (load:-N).
+    /// Force column and unit (N, kN, lbf); a minus sign reads it reversed (load:-N). Where
+    /// the header has no force_n, the one column whose name reads as force with its unit
+    /// ("Load (kN)") is read.
     #[arg(long, default_value = "force_n")]
     pub force: String,
-    /// Position column and unit (mm, m, in); a minus sign reads it reversed (x:-mm).
+    /// Position column and unit (mm, m, in); a minus sign reads it reversed (x:-mm). Where
+    /// the header has no position_mm, the one column whose name reads as position with its
+    /// unit ("x_in") is read.
     #[arg(long, default_value = "position_mm")]
     pub position: String,
     /// Allowed deviation of each sampling interval from the mean interval so far, e.g. 10%.
