@@ -994,3 +994,86 @@ fn a_log_its_caller_re_timed_is_not_screened_again() {
     assert!(applied.force_delay_screen.is_none());
     assert!(applied.force_delay.is_none());
 }
+
+/// The speed a refused simulation's message advises (`--speed X runs the whole of it`).
+fn advised_speed(message: &str) -> Option<f64> {
+    let rest = message.split("--speed ").nth(1)?;
+    rest.split_whitespace().next()?.parse().ok()
+}
+
+#[test]
+fn a_run_the_simulator_refuses_says_what_runs_it_and_that_runs() {
+    // The paper's Table I damping with 1 N of friction on the paper's spring: the damper force
+    // falls with speed on the sines and steps, and the rod would push on the ramp-holds.
+    let table_i = Dynamics {
+        m_n_s2_per_mm: 0.39,
+        d0_n: 1.0,
+        d1_n_s_per_mm: 1.84,
+        d2_n_s3_per_mm3: -0.0108,
+    };
+    for profile in [Profile::Sines, Profile::Steps, Profile::RampHold] {
+        let mut settings = SimSettings {
+            profile,
+            duration_s: 120.0,
+            dynamics: table_i,
+            ..SimSettings::default()
+        };
+        let message = simulate(common::paper_law(), XMAX_MM, FMAX_N, &settings)
+            .unwrap_err()
+            .to_string();
+        let speed = advised_speed(&message).unwrap_or_else(|| panic!("{profile:?}: {message}"));
+        assert!(speed < 1.0, "{profile:?}: {message}");
+        settings.speed = speed;
+        let (log, truth) = simulate(common::paper_law(), XMAX_MM, FMAX_N, &settings)
+            .unwrap_or_else(|e| panic!("{profile:?} at the advised --speed {speed}: {e}"));
+        // Every force the run needs is one the wire can pull, and the damper force rises with
+        // speed at every velocity the run reaches.
+        assert!(truth.force_n.iter().all(|f| (0.0..=FMAX_N).contains(f)));
+        let (lo, hi) = log.position_range_mm();
+        assert!(hi - lo > 1.0, "{profile:?}: the run moves");
+    }
+    // A spring weaker than the friction at low deflection: the message gives the friction the
+    // spring carries, the law's least force over the run.
+    let weak = ExpLaw {
+        mu_n: 1.0,
+        k2_per_mm: 0.2,
+        f0_n: 0.0,
+    };
+    let mut settings = SimSettings {
+        profile: Profile::Steps,
+        duration_s: 120.0,
+        dynamics: Dynamics {
+            d0_n: 3.0,
+            ..Dynamics::default()
+        },
+        ..SimSettings::default()
+    };
+    let message = simulate(weak, XMAX_MM, FMAX_N, &settings)
+        .unwrap_err()
+        .to_string();
+    let carried: f64 = message
+        .split("use a d0 below ")
+        .nth(1)
+        .and_then(|r| r.split_whitespace().next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("{message}"));
+    settings.dynamics.d0_n = 0.0;
+    let (_, truth) = simulate(weak, XMAX_MM, FMAX_N, &settings).unwrap();
+    let lowest = truth
+        .position_mm
+        .iter()
+        .fold(f64::INFINITY, |a, &x| a.min(x));
+    let at_lowest = weak.mu_n * (weak.k2_per_mm * lowest).exp() + weak.f0_n;
+    assert!(
+        (carried - at_lowest).abs() < 0.01,
+        "{carried} against {at_lowest}"
+    );
+    // With less friction than that, the run goes, at the speed advised if one is.
+    settings.dynamics.d0_n = 0.9 * carried;
+    if let Err(e) = simulate(weak, XMAX_MM, FMAX_N, &settings) {
+        let message = e.to_string();
+        assert!(!message.contains("use a d0 below"), "{message}");
+        settings.speed = advised_speed(&message).unwrap_or_else(|| panic!("{message}"));
+        simulate(weak, XMAX_MM, FMAX_N, &settings).unwrap();
+    }
+}

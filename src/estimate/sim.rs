@@ -148,21 +148,12 @@ pub struct Truth {
 /// Why a run could not be simulated.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SimError {
-    /// Produced by [`simulate`] when the profile needs a pushing force or too much force.
-    #[error(
-        "the {profile:?} profile needs a rod force of {force_n:.3} N at t = {t_s:.3} s, outside 0 ... {limit_n:.1} N \
-         (the wire only pulls); lower the damping or run the profile slower (--speed)"
-    )]
-    ForceOutOfRange {
-        /// Profile.
-        profile: Profile,
-        /// Force needed.
-        force_n: f64,
-        /// When.
-        t_s: f64,
-        /// Upper limit.
-        limit_n: f64,
-    },
+    /// Produced by [`simulate`] when the profile cannot run with these dynamics: a rod force
+    /// that would push (the wire only pulls) or exceed the limit, or a damper force that would
+    /// fall with speed. The message says where, and what change runs it (a `--speed` found to
+    /// run the whole profile, or the friction the spring can carry).
+    #[error("{0}")]
+    Unrunnable(String),
     /// Produced by [`simulate`] for unusable settings.
     #[error("{0}")]
     Settings(String),
@@ -224,6 +215,23 @@ pub struct SimSample {
     pub sigma_n_per_mm: f64,
     /// Generalised damping D = d1 + 3 d2 xd^2 (N s/mm).
     pub d_n_s_per_mm: f64,
+}
+
+/// The noise-free motion and rod force of one sample ([`Simulator`]).
+#[derive(Debug, Clone, Copy)]
+struct Motion {
+    x: f64,
+    xd: f64,
+    f: f64,
+}
+
+/// Why a sample cannot be simulated.
+#[derive(Debug, Clone, Copy)]
+enum Unrunnable {
+    /// The damper force d1 xd + d2 xd^3 would fall with speed at velocity `xd`.
+    DamperFalls { xd: f64 },
+    /// The rod force leaves 0 ... the limit.
+    Force { force_n: f64 },
 }
 
 /// A calibration run generated sample by sample, for runs too long to hold ([`simulate`]
@@ -356,15 +364,11 @@ impl Simulator {
         (self.settings.duration_s * self.settings.rate_hz).round() as usize
     }
 
-    /// Sample `i`; samples must be taken in order from 0 (the noise is drawn as they come).
-    pub fn sample(&mut self, i: usize) -> Result<SimSample, SimError> {
-        let s = &self.settings;
+    /// The profile's position (mm), velocity (mm/s) and acceleration (mm/s^2) at its own
+    /// clock's `t` (s), at its nominal speed.
+    fn kinematics(&self, t: f64) -> (f64, f64, f64) {
         let xmax_mm = self.xmax_mm;
-        let dt = 1.0 / s.rate_hz;
-        // The profile runs on a scaled clock: its velocity scales with `speed`, its
-        // acceleration with its square.
-        let t = i as f64 * dt * s.speed;
-        let (x, xd, xdd) = match s.profile {
+        match self.settings.profile {
             Profile::Sines => {
                 let (w1, w2) = (std::f64::consts::TAU * 0.15, std::f64::consts::TAU * 0.41);
                 let (a1, a2) = (0.22 * xmax_mm, 0.13 * xmax_mm);
@@ -377,22 +381,23 @@ impl Simulator {
             Profile::RampHold => moves(&self.ramp_levels, 4.0, 2.0, t),
             Profile::Steps => moves(&self.step_levels, STEP_RAMP_S, 1.5, t),
             Profile::Static => (0.5 * xmax_mm, 0.0, 0.0),
-        };
-        let (xd, xdd) = (xd * s.speed, xdd * s.speed * s.speed);
-        let t = i as f64 * dt;
-        let d = s.dynamics;
+        }
+    }
+
+    /// The run's motion and rod force at sample `i` when the profile runs at `speed`, free of
+    /// noise: position (mm), velocity (mm/s), acceleration (mm/s^2), the friction's sign and the
+    /// rod force (N). `direction` is the last direction of motion (the unloading curve's),
+    /// carried from sample to sample. Fails where the damper force would fall with speed or
+    /// the rod force leaves 0 ... the limit.
+    fn motion(&self, i: usize, speed: f64, direction: &mut f64) -> Result<Motion, Unrunnable> {
+        let dt = 1.0 / self.settings.rate_hz;
+        // The profile runs on a scaled clock: its velocity scales with `speed`, its
+        // acceleration with its square.
+        let (x, xd, xdd) = self.kinematics(i as f64 * dt * speed);
+        let (xd, xdd) = (xd * speed, xdd * speed * speed);
+        let d = self.settings.dynamics;
         if d.d2_n_s3_per_mm3 < 0.0 && 3.0 * d.d2_n_s3_per_mm3.abs() * xd * xd > d.d1_n_s_per_mm {
-            return Err(SimError::Settings(format!(
-                "at t = {t:.3} s the {:?} profile moves at {:.2} mm/s, where the damper force \
-                 d1 xd + d2 xd^3 would fall with speed (above sqrt(d1 / (3 |d2|)) = {:.2} mm/s); \
-                 run the profile slower (--speed {:.2} or less), or use a smaller |d2| or a larger d1",
-                s.profile,
-                xd.abs(),
-                (d.d1_n_s_per_mm / (3.0 * d.d2_n_s3_per_mm3.abs())).sqrt(),
-                // This instant's speed scaled to 80 % of the limit (a later, faster instant
-                // may need less).
-                0.8 * s.speed * (d.d1_n_s_per_mm / (3.0 * d.d2_n_s3_per_mm3.abs())).sqrt() / xd.abs()
-            )));
+            return Err(Unrunnable::DamperFalls { xd });
         }
         let sgn = if xd > 0.0 {
             1.0
@@ -402,10 +407,10 @@ impl Simulator {
             0.0
         };
         if sgn != 0.0 {
-            self.direction = sgn;
+            *direction = sgn;
         }
         let spring = match &self.unloading {
-            Some(unloading) if self.direction < 0.0 => unloading,
+            Some(unloading) if *direction < 0.0 => unloading,
             _ => &self.law,
         };
         let f = d.m_n_s2_per_mm * xdd
@@ -414,13 +419,94 @@ impl Simulator {
             + d.d0_n * sgn
             + spring.force_n(x);
         if !(0.0..=self.limit_n).contains(&f) {
-            return Err(SimError::ForceOutOfRange {
-                profile: s.profile,
-                force_n: f,
-                t_s: t,
-                limit_n: self.limit_n,
-            });
+            return Err(Unrunnable::Force { force_n: f });
         }
+        Ok(Motion { x, xd, f })
+    }
+
+    /// The fastest of a few speeds below `speed` (9/10 of it down to [`MIN_SPEED`]) at which
+    /// the whole run keeps its damper force rising with speed and its rod force in range;
+    /// None when none does.
+    fn speed_that_runs(&self, speed: f64) -> Option<f64> {
+        let mut candidates: Vec<f64> = [
+            0.9, 0.8, 0.7, 0.6, 0.5, 0.4, 0.3, 0.25, 0.2, 0.15, 0.1, 0.07, 0.05, 0.03, 0.02, 0.01,
+            0.005, 0.002, 0.001,
+        ]
+        .iter()
+        .map(|f| (f * speed * 100.0).floor() / 100.0)
+        .filter(|&v| v >= MIN_SPEED)
+        .collect();
+        candidates.dedup();
+        candidates.into_iter().find(|&v| {
+            let mut direction = 1.0;
+            (0..self.samples()).all(|i| self.motion(i, v, &mut direction).is_ok())
+        })
+    }
+
+    /// What to change so that the run can be simulated, for the failure `why`.
+    fn unrunnable(&self, why: Unrunnable, t_s: f64) -> SimError {
+        let s = &self.settings;
+        let d = s.dynamics;
+        let slower = || match self.speed_that_runs(s.speed) {
+            Some(v) => format!("run the profile slower (--speed {v:.2} runs the whole of it), or "),
+            None => String::new(),
+        };
+        let message = match why {
+            Unrunnable::DamperFalls { xd } => format!(
+                "at t = {t_s:.3} s the {:?} profile moves at {:.2} mm/s, where the damper force \
+                 d1 xd + d2 xd^3 would fall with speed (above sqrt(d1 / (3 |d2|)) = {:.2} \
+                 mm/s); {}use a smaller |d2| or a larger d1",
+                s.profile,
+                xd.abs(),
+                (d.d1_n_s_per_mm / (3.0 * d.d2_n_s3_per_mm3.abs())).sqrt(),
+                slower()
+            ),
+            Unrunnable::Force { force_n, .. } => {
+                // The friction a retracting rod needs the spring to overcome: where the
+                // spring's force falls below d0 on the run's way down, no speed helps.
+                let retracting = self.unloading.as_ref().unwrap_or(&self.law);
+                let weakest = (0..self.samples())
+                    .map(|i| {
+                        let (x, _, _) = self.kinematics(i as f64 * s.speed / s.rate_hz);
+                        retracting.force_n(x)
+                    })
+                    .fold(f64::INFINITY, f64::min);
+                let change = if weakest < d.d0_n {
+                    format!(
+                        "the Coulomb friction d0 = {} N is more than the spring's least force \
+                         over the run ({weakest:.2} N), which no speed changes: use a d0 below \
+                         {weakest:.2} N, or a spec whose spring pulls harder at low deflection \
+                         (a larger F0)",
+                        d.d0_n
+                    )
+                } else {
+                    "lower the damping or the inertia".to_string()
+                };
+                format!(
+                    "the {:?} profile needs a rod force of {force_n:.3} N at t = {t_s:.3} s, \
+                     outside 0 ... {:.1} N (the wire only pulls); {}{change}",
+                    s.profile,
+                    self.limit_n,
+                    slower()
+                )
+            }
+        };
+        SimError::Unrunnable(message)
+    }
+
+    /// Sample `i`; samples must be taken in order from 0 (the noise is drawn as they come).
+    pub fn sample(&mut self, i: usize) -> Result<SimSample, SimError> {
+        let t = i as f64 / self.settings.rate_hz;
+        let mut direction = self.direction;
+        let Motion { x, xd, f } = self
+            .motion(i, self.settings.speed, &mut direction)
+            .map_err(|why| self.unrunnable(why, t))?;
+        self.direction = direction;
+        let d = self.settings.dynamics;
+        let spring = match &self.unloading {
+            Some(unloading) if self.direction < 0.0 => unloading,
+            _ => &self.law,
+        };
         let force_noise = self.force_noise.sample(&mut self.rng);
         let position_noise = self.position_noise.sample(&mut self.rng);
         Ok(SimSample {
