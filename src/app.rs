@@ -323,6 +323,9 @@ pub fn read_log_file(
     if let Some(w) = filled_warning(&log.filled, &log.left_out.0, log.left_out.1) {
         eprintln!("warning: {}: {w}", path.display());
     }
+    if let Some(w) = interval_scatter_warning(log.interval_scatter) {
+        eprintln!("warning: {}: {w}", path.display());
+    }
     Ok(log)
 }
 
@@ -375,6 +378,30 @@ pub fn recognised_note(columns: &[crate::estimate::log::RecognisedColumn]) -> Op
          map other columns)",
         missing,
         read.join(", ")
+    ))
+}
+
+/// The scatter of a log's sampling intervals (a fraction of the mean, beyond the times'
+/// rounding) above which reading its samples as evenly spaced is warned about.
+///
+/// Measured on a simulated 1 kHz run picked at uneven intervals about 10 ms, each sample at its
+/// stamped time: at 8 % RMS scatter every identified parameter was within its standard
+/// deviation; at 14 %, m was 4.8 % low (0.45 of its standard deviation); at 20 %, 22 % low
+/// (4.2 of them).
+pub const INTERVAL_SCATTER_WARNING: f64 = 0.1;
+
+/// The warning for a log whose sampling intervals scatter beyond
+/// [`INTERVAL_SCATTER_WARNING`] (read with a wide `--sampling-tolerance`).
+pub fn interval_scatter_warning(scatter: Option<f64>) -> Option<String> {
+    let scatter = scatter.filter(|s| *s > INTERVAL_SCATTER_WARNING)?;
+    Some(format!(
+        "the sampling intervals scatter by {:.0} % RMS about their mean (beyond the times' \
+         rounding), and the samples are read as evenly spaced: right where only the clock's \
+         stamps jitter, but where the samples were taken at the stamped times (a loop timed in \
+         software) the inertia and damping come out biased beyond their standard deviations at \
+         a scatter of 15 to 20 % (m 22 % low on a simulated run at 20 %); log with a sampler \
+         timed in hardware",
+        100.0 * scatter
     ))
 }
 
@@ -801,6 +828,9 @@ pub fn survey_log_file(
         eprintln!("note: {}: {n}", log_path.display());
     }
     if let Some(w) = filled_warning(reader.filled(), reader.left_out(), reader.left_out_count()) {
+        eprintln!("warning: {}: {w}", log_path.display());
+    }
+    if let Some(w) = interval_scatter_warning(reader.interval_scatter()) {
         eprintln!("warning: {}: {w}", log_path.display());
     }
     Ok(surveyed)

@@ -358,6 +358,78 @@ fn a_clock_that_jitters_is_held_to_the_mean_interval() {
 }
 
 #[test]
+fn samples_taken_at_uneven_times_are_measured_and_warned_about() {
+    use rand::{Rng, SeedableRng};
+    // A 1 kHz run picked at intervals of 7 to 13 ms, each sample at its stamped time: a loop
+    // timed in software. The intervals' RMS scatter is 2 ms of 10 (uniform over 7 ... 13).
+    let settings = SimSettings {
+        duration_s: 120.0,
+        rate_hz: 1000.0,
+        seed: 3,
+        ..SimSettings::default()
+    };
+    let (fine, _) = simulate(common::paper_law(), 20.0, 230.0, &settings).unwrap();
+    let mut rng = rand::rngs::StdRng::seed_from_u64(1);
+    let header = "t_s,force_n,position_mm\n";
+    let (mut picked, mut even) = (String::from(header), String::from(header));
+    let mut i = 0;
+    while i < fine.len() {
+        picked.push_str(&format!(
+            "{:.6},{},{}\n",
+            fine.t_s[i], fine.force_n[i], fine.position_mm[i]
+        ));
+        i += rng.random_range(7..=13);
+    }
+    for i in (0..fine.len()).step_by(10) {
+        even.push_str(&format!(
+            "{:.6},{},{}\n",
+            fine.t_s[i], fine.force_n[i], fine.position_mm[i]
+        ));
+    }
+    let wide = |text: &str| read_log(text.as_bytes(), &ColumnMap::default(), 0.6, |_| {});
+    // Refused at the default tolerance, read at a wide one with its scatter measured.
+    assert!(matches!(read(&picked), Err(LogError::Irregular { .. })));
+    let scatter = wide(&picked).unwrap().interval_scatter.unwrap();
+    assert!((scatter - 0.2).abs() < 0.02, "{scatter}");
+    assert!(wide(&even).unwrap().interval_scatter.unwrap() < 1e-3);
+    // Times rounded to whole milliseconds at 300 Hz (intervals of 3 and 4 ms) scatter by their
+    // rounding alone, which is not counted.
+    let mut rounded = String::from("t_ms,force_n,position_mm\n");
+    for i in 0..30_000 {
+        let t_ms = (i as f64 * 1000.0 / 300.0).round();
+        rounded.push_str(&format!(
+            "{t_ms},{},{}\n",
+            fine.force_n[i], fine.position_mm[i]
+        ));
+    }
+    let log = read_log(
+        rounded.as_bytes(),
+        &common::column_map("t_ms:ms", "force_n", "position_mm"),
+        0.1,
+        |_| {},
+    )
+    .unwrap();
+    assert!(
+        log.interval_scatter.unwrap() < 0.01,
+        "{:?}",
+        log.interval_scatter
+    );
+    // The command reads the uneven log and says what reading it as even costs.
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("loop.csv"), &picked).unwrap();
+    let out = camspring(
+        dir.path(),
+        &["noise", "loop.csv", "--sampling-tolerance", "60%"],
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert!(
+        stderr.contains("the sampling intervals scatter by 20 % RMS"),
+        "{stderr}"
+    );
+}
+
+#[test]
 fn times_written_to_a_coarser_resolution_than_the_sampling_are_read_as_rounded() {
     // A rig sampling at 300 Hz that writes its times in milliseconds: intervals of 3 and 4 ms
     // (20 % off the mean), which are rounding, not irregular sampling.

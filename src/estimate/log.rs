@@ -587,7 +587,9 @@ pub enum LogError {
     #[error(
         "line {line}: sampling interval {} differs from the log's {} by more than \
          {tolerance_percent} % (a gap or irregular sampling); expected evenly sampled data (a \
-         rig whose clock stamps the samples with jitter needs a wider --sampling-tolerance)",
+         rig whose clock stamps evenly taken samples with jitter needs a wider \
+         --sampling-tolerance; samples taken at uneven times are read as evenly spaced there, \
+         which biases the inertia and damping)",
         interval_text(*dt_s),
         interval_text(*nominal_s)
     )]
@@ -682,6 +684,10 @@ pub struct CalibrationLog {
     /// ([`LogReader::recognised`]).
     #[serde(skip)]
     pub recognised: Vec<RecognisedColumn>,
+    /// The sampling intervals' scatter about their mean beyond the times' rounding, as a
+    /// fraction of the mean ([`LogReader::interval_scatter`]).
+    #[serde(skip)]
+    pub interval_scatter: Option<f64>,
 }
 
 /// A column the reader took for a quantity by its name, the header lacking the column the map
@@ -908,6 +914,8 @@ pub struct LogReader<R: Read> {
     /// For a column read by a name that carries no unit: the missing column's error, raised
     /// when no units row gives the unit.
     unit_pending: Option<LogError>,
+    /// The single sampling intervals (no gap in them): their sum, sum of squares and count.
+    interval_sums: (f64, f64, u64),
     /// Rows with no value since the last complete one: their lines (the first few) and count.
     empty: (Vec<u64>, usize),
     /// Rows with no value before the first complete row or after the last: not filled.
@@ -1131,6 +1139,7 @@ impl<R: Read> LogReader<R> {
             units_row: None,
             recognised,
             unit_pending,
+            interval_sums: (0.0, 0.0, 0),
             empty: (Vec::new(), 0),
             left_out: Vec::new(),
             left_out_count: 0,
@@ -1152,6 +1161,26 @@ impl<R: Read> LogReader<R> {
     /// quantity ([`RecognisedColumn`]). Empty when every column was found as mapped.
     pub fn recognised(&self) -> &[RecognisedColumn] {
         &self.recognised
+    }
+
+    /// The scatter of the single sampling intervals read so far about their mean, beyond what
+    /// the times' written rounding explains (its largest, a quarter of the resolution squared,
+    /// is taken out of the variance), as a fraction of the mean interval; None before two
+    /// intervals. Samples are read as evenly spaced: right where only a clock's stamps jitter,
+    /// and a bias in inertia and damping where the samples were taken at the stamped times.
+    pub fn interval_scatter(&self) -> Option<f64> {
+        let (sum, sum_sq, n) = self.interval_sums;
+        if n < 2 {
+            return None;
+        }
+        let mean = sum / n as f64;
+        let variance = (sum_sq / n as f64 - mean * mean).max(0.0);
+        let resolution = if self.time_resolution_s < mean {
+            self.time_resolution_s
+        } else {
+            0.0
+        };
+        Some((variance - 0.25 * resolution * resolution).max(0.0).sqrt() / mean)
     }
 
     /// Dropped samples filled in so far.
@@ -1407,6 +1436,12 @@ impl<R: Read> LogReader<R> {
                 }
                 Some(_) => {}
             }
+            if intervals == 1 && empty_rows == 0 {
+                let (sum, sum_sq, n) = &mut self.interval_sums;
+                *sum += dt;
+                *sum_sq += dt * dt;
+                *n += 1;
+            }
             // The interval a sample is held to is the mean so far, not the first alone: a rig
             // whose clock jitters may start with an interval at the edge of the tolerance.
             self.intervals += intervals;
@@ -1525,6 +1560,7 @@ pub fn collect_log<R: Read>(
     log.left_out = (reader.left_out().to_vec(), reader.left_out_count());
     log.units_row = reader.units_row().cloned();
     log.recognised = reader.recognised.clone();
+    log.interval_scatter = reader.interval_scatter();
     log.filled = reader.filled;
     Ok(log)
 }

@@ -944,6 +944,7 @@ pub fn retime_log(log: &CalibrationLog, delay: RowDelay) -> CalibrationLog {
         left_out: log.left_out.clone(),
         units_row: log.units_row.clone(),
         recognised: log.recognised.clone(),
+        interval_scatter: log.interval_scatter,
         ..CalibrationLog::default()
     };
     for s in ForceRetimer::new(samples, delay).flatten() {
