@@ -38,7 +38,7 @@ fn judge(spec: &Path, log: &Path, noise: SensorNoise, zero_mm: f64) -> (f64, Str
         ..EstimateOptions::new(noise)
     };
     let svg = log.with_extension("svg");
-    let (verdict, _) = run_validate(
+    let (verdict, _, _) = run_validate(
         Some(spec),
         log,
         &ColumnMap::default(),

@@ -314,19 +314,80 @@ pub fn read_log_file(
         b.finish_and_clear();
     }
     let log = result.map_err(|e| log_error(path, e))?;
-    if let Some(n) = recognised_note(&log.recognised) {
-        eprintln!("note: {}: {n}", path.display());
-    }
-    if let Some(n) = units_row_note(log.units_row.as_ref()) {
-        eprintln!("note: {}: {n}", path.display());
-    }
-    if let Some(w) = filled_warning(&log.filled, &log.left_out.0, log.left_out.1) {
-        eprintln!("warning: {}: {w}", path.display());
-    }
-    if let Some(w) = interval_scatter_warning(log.interval_scatter) {
-        eprintln!("warning: {}: {w}", path.display());
-    }
+    LogReading::of_log(&log).print(path);
     Ok(log)
+}
+
+/// What reading a log found besides its samples: how its columns were read, dropped samples
+/// filled, rows left out, samples taken at uneven times. Printed on stderr as the log is read
+/// (notes and warnings), and written into the JSON of the command that read it as
+/// `log_reading`, so that a record kept with `--json-to` holds it too.
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
+pub struct LogReading {
+    /// How the columns were read: by their names, or in a units row's units.
+    pub notes: Vec<String>,
+    /// Dropped samples filled, rows left out, uneven sampling.
+    pub warnings: Vec<String>,
+    /// Dropped samples filled by linear interpolation.
+    pub filled_samples: usize,
+    /// Rows with no value left out at the log's start or end.
+    pub rows_left_out: usize,
+    /// The single sampling intervals' RMS scatter about their mean, beyond the times'
+    /// rounding, as a fraction of the mean interval.
+    pub interval_scatter_fraction: Option<f64>,
+}
+
+impl LogReading {
+    /// What the reader found: the columns it read by their names, the units row, the gaps it
+    /// filled and the rows it left out (the first of `left_out_count`), and the intervals'
+    /// scatter.
+    pub fn new(
+        recognised: &[crate::estimate::log::RecognisedColumn],
+        units_row: Option<&(u64, [String; 3])>,
+        filled: &[crate::estimate::log::FilledGap],
+        left_out: &[u64],
+        left_out_count: usize,
+        interval_scatter: Option<f64>,
+    ) -> LogReading {
+        LogReading {
+            notes: [recognised_note(recognised), units_row_note(units_row)]
+                .into_iter()
+                .flatten()
+                .collect(),
+            warnings: [
+                filled_warning(filled, left_out, left_out_count),
+                interval_scatter_warning(interval_scatter),
+            ]
+            .into_iter()
+            .flatten()
+            .collect(),
+            filled_samples: filled.iter().map(|g| g.samples).sum(),
+            rows_left_out: left_out_count,
+            interval_scatter_fraction: interval_scatter,
+        }
+    }
+
+    /// What reading a log held whole found.
+    pub fn of_log(log: &crate::estimate::log::CalibrationLog) -> LogReading {
+        LogReading::new(
+            &log.recognised,
+            log.units_row.as_ref(),
+            &log.filled,
+            &log.left_out.0,
+            log.left_out.1,
+            log.interval_scatter,
+        )
+    }
+
+    /// Prints the notes and warnings on stderr, each with the log's path.
+    pub fn print(&self, path: &Path) {
+        for n in &self.notes {
+            eprintln!("note: {}: {n}", path.display());
+        }
+        for w in &self.warnings {
+            eprintln!("warning: {}: {w}", path.display());
+        }
+    }
 }
 
 /// The progress bar of reading a log file of `size` bytes (None off a terminal).
@@ -467,6 +528,8 @@ pub struct NoiseRun {
     pub model: crate::estimate::noise::NoiseModel,
     /// The Allan plot written.
     pub svg_path: PathBuf,
+    /// What reading the log found besides its samples.
+    pub log_reading: LogReading,
 }
 
 /// Runs `camspring noise`: Allan variance of a log at rest, and `allan.svg`.
@@ -487,7 +550,11 @@ pub fn run_noise(
             .join("allan.svg")
     });
     write_atomic(&svg_path, allan_svg(&model).as_bytes())?;
-    Ok(NoiseRun { model, svg_path })
+    Ok(NoiseRun {
+        model,
+        svg_path,
+        log_reading: LogReading::of_log(&log),
+    })
 }
 
 /// Reads the sensor noise from a `camspring noise --json` file.
@@ -530,7 +597,8 @@ pub fn run_identify(
     use crate::estimate::retime::{
         carry_delay_uncertainty, fit_force_delay, retime_reduced, screen_force_delay,
     };
-    let surveyed = survey_log_file(log_path, map, sampling_tolerance, f64::INFINITY)?;
+    let (surveyed, log_reading) =
+        survey_log_file(log_path, map, sampling_tolerance, f64::INFINITY)?;
     let mut noise = noise.resolve(surveyed.noise.as_ref());
     warn_noise(log_path, &noise);
     let mut delay =
@@ -561,6 +629,7 @@ pub fn run_identify(
         noise,
         force_delay: delay,
         force_delay_screen: screen,
+        log_reading,
     })
 }
 
@@ -577,6 +646,8 @@ pub struct IdentifyRun {
     pub force_delay: Option<crate::estimate::retime::ForceDelayFit>,
     /// Where no delay was asked for, what identification's profile says of one.
     pub force_delay_screen: Option<crate::estimate::retime::ForceDelayScreen>,
+    /// What reading the log found besides its samples.
+    pub log_reading: LogReading,
 }
 
 /// Re-times the force of a log held in memory by the force channel's delay (given, or fitted
@@ -799,7 +870,7 @@ pub fn survey_log_file(
     map: &crate::estimate::log::ColumnMap,
     sampling_tolerance: f64,
     identify_span_s: f64,
-) -> Result<crate::estimate::pipeline::LogSurvey> {
+) -> Result<(crate::estimate::pipeline::LogSurvey, LogReading)> {
     use crate::estimate::pipeline::survey;
     let (mut reader, size) = open_log_file(log_path, map, sampling_tolerance)?;
     let bar = reading_bar(log_path, size);
@@ -821,25 +892,22 @@ pub fn survey_log_file(
         b.finish_and_clear();
     }
     let surveyed = surveyed.map_err(|e| log_error(log_path, e))?;
-    if let Some(n) = recognised_note(reader.recognised()) {
-        eprintln!("note: {}: {n}", log_path.display());
-    }
-    if let Some(n) = units_row_note(reader.units_row()) {
-        eprintln!("note: {}: {n}", log_path.display());
-    }
-    if let Some(w) = filled_warning(reader.filled(), reader.left_out(), reader.left_out_count()) {
-        eprintln!("warning: {}: {w}", log_path.display());
-    }
-    if let Some(w) = interval_scatter_warning(reader.interval_scatter()) {
-        eprintln!("warning: {}: {w}", log_path.display());
-    }
-    Ok(surveyed)
+    let reading = LogReading::new(
+        reader.recognised(),
+        reader.units_row(),
+        reader.filled(),
+        reader.left_out(),
+        reader.left_out_count(),
+        reader.interval_scatter(),
+    );
+    reading.print(log_path);
+    Ok((surveyed, reading))
 }
 
 /// Runs `camspring estimate`: streams the log twice (a survey with identification's samples,
 /// then the filter), writing the time series CSV (default `<log>.est.csv`) as the filter
 /// goes, every `every`-th filtered sample (1: all). Memory is constant whatever the log's
-/// length. Returns the run and the path written.
+/// length. Returns the run, the path written and what reading the log found.
 pub fn run_estimate(
     log_path: &Path,
     map: &crate::estimate::log::ColumnMap,
@@ -847,11 +915,12 @@ pub fn run_estimate(
     opts: &EstimateOptions,
     out: Option<&Path>,
     every: u64,
-) -> Result<(EstimateRun, PathBuf)> {
+) -> Result<(EstimateRun, PathBuf, LogReading)> {
     use crate::estimate::pipeline::{estimate_stream, EstimateError};
     // The first pass: the whole log is checked (every error named with its line) before any
     // output is started.
-    let surveyed = survey_log_file(log_path, map, sampling_tolerance, opts.identify_span_s)?;
+    let (surveyed, log_reading) =
+        survey_log_file(log_path, map, sampling_tolerance, opts.identify_span_s)?;
     let out = out
         .map(Path::to_path_buf)
         .unwrap_or_else(|| log_path.with_extension("est.csv"));
@@ -898,7 +967,7 @@ pub fn run_estimate(
             )))
         }
     }
-    Ok((est, out))
+    Ok((est, out, log_reading))
 }
 
 /// The verdict of `camspring validate`.
@@ -944,6 +1013,7 @@ impl Verdict {
 /// Runs `camspring validate`: the log against the spec's designed law; writes
 /// `validation.svg` and `validation.html` (default next to the log). An exponential law is
 /// checked through identification and the EKF, a table through its quasi-static curve.
+/// Returns the verdict, the plot's path and what reading the log found.
 pub fn run_validate(
     spec_path: Option<&Path>,
     log_path: &Path,
@@ -952,7 +1022,7 @@ pub fn run_validate(
     opts: &EstimateOptions,
     tolerance: Option<f64>,
     svg: Option<&Path>,
-) -> Result<(Verdict, PathBuf)> {
+) -> Result<(Verdict, PathBuf, LogReading)> {
     use crate::render::calibration::{curve_validation_svg, validation_svg};
     use crate::verdict::validate::validate_curve;
     let spec = load_spec(spec_path)?;
@@ -970,6 +1040,7 @@ pub fn run_validate(
     };
     let tolerance = tolerance.unwrap_or(crate::verdict::validate::BAND_MODE_TOLERANCE);
     let mut log = read_log_file(log_path, map, sampling_tolerance, true)?;
+    let log_reading = LogReading::of_log(&log);
     // The sensor noise: as given, else from the log's own differences.
     let resolved = opts
         .noise
@@ -1191,7 +1262,7 @@ pub fn run_validate(
     });
     write_atomic(&svg_path, svg_text.as_bytes())?;
     write_atomic(&svg_path.with_file_name("validation.html"), html.as_bytes())?;
-    Ok((verdict, svg_path))
+    Ok((verdict, svg_path, log_reading))
 }
 
 /// What `camspring sweep` wrote.
@@ -1562,6 +1633,8 @@ pub struct DiagnoseRun {
     pub diagnosis: crate::verdict::diagnose::Diagnosis,
     /// The plot written.
     pub svg_path: PathBuf,
+    /// What reading the log found besides its samples.
+    pub log_reading: LogReading,
 }
 
 /// Options of `camspring diagnose` and `revise`: the log's columns, the sensors, the window
@@ -1608,14 +1681,19 @@ fn identify_for_verdict(
     }
 }
 
-/// The design and the diagnosis of a log against it.
+/// The design, the diagnosis of a log against it, and what reading the log found.
 fn diagnose_log(
     spec: &Spec,
     log_path: &Path,
     opts: &DiagnoseOptions,
-) -> Result<(crate::design::Design, crate::verdict::diagnose::Diagnosis)> {
+) -> Result<(
+    crate::design::Design,
+    crate::verdict::diagnose::Diagnosis,
+    LogReading,
+)> {
     let design = crate::design::design_with(spec, false)?;
     let mut log = read_log_file(log_path, &opts.map, opts.sampling_tolerance, true)?;
+    let log_reading = LogReading::of_log(&log);
     let resolved = opts
         .noise
         .resolve(crate::estimate::noise::log_noise(&log).as_ref());
@@ -1653,7 +1731,7 @@ fn diagnose_log(
         diagnosis.force_delay_screen = identification
             .and_then(|id| crate::estimate::retime::screen_force_delay(&reduced, &noise, &id));
     }
-    Ok((design, diagnosis))
+    Ok((design, diagnosis, log_reading))
 }
 
 /// Runs `camspring diagnose`: the log explained by the design's forward model with the build
@@ -1665,7 +1743,7 @@ pub fn run_diagnose(
     svg: Option<&Path>,
 ) -> Result<DiagnoseRun> {
     let spec = load_spec(Some(spec_path))?;
-    let (_, diagnosis) = diagnose_log(&spec, log_path, opts)?;
+    let (_, diagnosis, log_reading) = diagnose_log(&spec, log_path, opts)?;
     let svg_path = svg.map(Path::to_path_buf).unwrap_or_else(|| {
         log_path
             .parent()
@@ -1679,6 +1757,7 @@ pub fn run_diagnose(
     Ok(DiagnoseRun {
         diagnosis,
         svg_path,
+        log_reading,
     })
 }
 
@@ -1695,6 +1774,8 @@ pub struct ReviseRun {
     pub written: Vec<PathBuf>,
     /// The revised spec, when one was written.
     pub spec_path: Option<PathBuf>,
+    /// What reading the log found besides its samples.
+    pub log_reading: LogReading,
 }
 
 /// The name of the file every `revise` run writes its decision to.
@@ -1716,7 +1797,7 @@ pub fn run_revise(
         path: spec_path.to_path_buf(),
         source,
     })?;
-    let (design, diagnosis) = diagnose_log(&spec, log_path, opts)?;
+    let (design, diagnosis, log_reading) = diagnose_log(&spec, log_path, opts)?;
     let unresolved = unresolved_parts(&diagnosis);
     let revision = if unresolved.is_empty() {
         revise(&design, &diagnosis, tolerance)
@@ -1776,6 +1857,7 @@ pub fn run_revise(
         revision,
         out_dir: out_dir.to_path_buf(),
         written,
+        log_reading,
     })
 }
 

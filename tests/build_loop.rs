@@ -318,7 +318,7 @@ fn validate_build(
         twins: 0,
         ..EstimateOptions::new(SensorNoise::default())
     };
-    let (verdict, _) = run_validate(
+    let (verdict, _, _) = run_validate(
         Some(&spec_path),
         &log_path,
         &ColumnMap::default(),

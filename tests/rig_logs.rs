@@ -419,7 +419,14 @@ fn samples_taken_at_uneven_times_are_measured_and_warned_about() {
     std::fs::write(dir.path().join("loop.csv"), &picked).unwrap();
     let out = camspring(
         dir.path(),
-        &["noise", "loop.csv", "--sampling-tolerance", "60%"],
+        &[
+            "noise",
+            "loop.csv",
+            "--sampling-tolerance",
+            "60%",
+            "--json-to",
+            "noise.json",
+        ],
     );
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(0), "{stderr}");
@@ -427,6 +434,13 @@ fn samples_taken_at_uneven_times_are_measured_and_warned_about() {
         stderr.contains("the sampling intervals scatter by 20 % RMS"),
         "{stderr}"
     );
+    let record: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("noise.json")).unwrap())
+            .unwrap();
+    let kept = record["log_reading"]["interval_scatter_fraction"]
+        .as_f64()
+        .unwrap();
+    assert!((kept - scatter).abs() < 1e-12, "{kept} against {scatter}");
 }
 
 #[test]
@@ -769,7 +783,10 @@ fn the_cli_reads_a_rig_log_and_warns_about_what_it_filled() {
         }
     }
     std::fs::write(dir.path().join("rig.csv"), rig).unwrap();
-    let out = camspring(dir.path(), &["identify", "rig.csv"]);
+    let out = camspring(
+        dir.path(),
+        &["identify", "rig.csv", "--json-to", "record.json"],
+    );
     assert_eq!(out.status.code(), Some(0));
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
@@ -777,6 +794,18 @@ fn the_cli_reads_a_rig_log_and_warns_about_what_it_filled() {
             && stderr.contains("1 before line 702 (after t =")
             && stderr.contains("1 before line 902 (after t = 8.98 s, a row with no value)"),
         "{stderr}"
+    );
+    // The record kept with the JSON holds the same warning, and the count.
+    let record: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("record.json")).unwrap())
+            .unwrap();
+    let reading = &record["log_reading"];
+    assert_eq!(reading["filled_samples"], 2, "{reading}");
+    assert_eq!(reading["rows_left_out"], 0, "{reading}");
+    let warning = reading["warnings"][0].as_str().unwrap();
+    assert!(
+        stderr.contains(warning) && warning.contains("1 before line 702"),
+        "{warning}"
     );
 }
 

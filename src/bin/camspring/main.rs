@@ -207,6 +207,27 @@ fn colour(text: &str) -> String {
         .replace("REFUSED", "\x1b[31mREFUSED\x1b[0m")
 }
 
+/// A command's JSON object with what reading its log found, as `log_reading`.
+fn with_log_reading(
+    v: impl serde::Serialize,
+    reading: &camspring::app::LogReading,
+) -> Result<serde_json::Value, Error> {
+    let encode = |e: serde_json::Error| {
+        Error::Export(ExportError::Encode {
+            what: "the JSON result",
+            message: e.to_string(),
+        })
+    };
+    let mut v = serde_json::to_value(v).map_err(encode)?;
+    if let Some(object) = v.as_object_mut() {
+        object.insert(
+            "log_reading".into(),
+            serde_json::to_value(reading).map_err(encode)?,
+        );
+    }
+    Ok(v)
+}
+
 fn to_json(v: &impl serde::Serialize) -> Result<String, Error> {
     serde_json::to_string_pretty(v).map_err(|e| {
         Error::Export(ExportError::Encode {
@@ -553,7 +574,10 @@ fn main() -> ExitCode {
                         format_noise(&run.model),
                         run.svg_path.display()
                     );
-                    Ok(Report::new(text, to_json(&noise_json(&run.model))?))
+                    Ok(Report::new(
+                        text,
+                        to_json(&with_log_reading(noise_json(&run.model), &run.log_reading)?)?,
+                    ))
                 }),
             json,
         ),
@@ -587,13 +611,16 @@ fn main() -> ExitCode {
                         run.force_delay.as_ref(),
                         run.force_delay_screen.as_ref(),
                     ),
-                    to_json(&identification_json(
-                        id,
-                        &run.noise,
-                        run.sample_rate_hz,
-                        run.force_delay.as_ref(),
-                        run.force_delay_screen.as_ref(),
-                    ))?,
+                    to_json(&with_log_reading(
+                        identification_json(
+                            id,
+                            &run.noise,
+                            run.sample_rate_hz,
+                            run.force_delay.as_ref(),
+                            run.force_delay_screen.as_ref(),
+                        ),
+                        &run.log_reading,
+                    )?)?,
                     code,
                 ))
             })(),
@@ -608,7 +635,8 @@ fn main() -> ExitCode {
         } => emit(
             (|| {
                 let (map, tol, opts) = calibration_options(&calibration)?;
-                let (est, path) = run_estimate(&log, &map, tol, &opts, out.as_deref(), every)?;
+                let (est, path, reading) =
+                    run_estimate(&log, &map, tol, &opts, out.as_deref(), every)?;
                 let code = if est.consistency.consistent {
                     EXIT_OK
                 } else {
@@ -621,7 +649,7 @@ fn main() -> ExitCode {
                         format_consistency(&est),
                         path.display()
                     ),
-                    to_json(&estimate_json(&est))?,
+                    to_json(&with_log_reading(estimate_json(&est), &reading)?)?,
                     code,
                 ))
             })(),
@@ -642,7 +670,7 @@ fn main() -> ExitCode {
                     ));
                 }
                 let (map, tol, opts) = calibration_options(&calibration)?;
-                let (v, path) = run_validate(
+                let (v, path, reading) = run_validate(
                     Some(&spec),
                     &log,
                     &map,
@@ -657,7 +685,11 @@ fn main() -> ExitCode {
                     Verdict::Curve(v) => format_curve_validation(v),
                 };
                 let text = format!("{verdict}  plot: {}\n", path.display());
-                Ok(Report::of_checks(text, to_json(&v)?, code))
+                Ok(Report::of_checks(
+                    text,
+                    to_json(&with_log_reading(&v, &reading)?)?,
+                    code,
+                ))
             })(),
             json,
         ),
@@ -676,7 +708,10 @@ fn main() -> ExitCode {
                     format_diagnosis(&run.diagnosis),
                     run.svg_path.display()
                 );
-                Ok(Report::new(text, to_json(&run.diagnosis)?))
+                Ok(Report::new(
+                    text,
+                    to_json(&with_log_reading(&run.diagnosis, &run.log_reading)?)?,
+                ))
             })(),
             json,
         ),
@@ -721,6 +756,7 @@ fn main() -> ExitCode {
                     "revision": run.revision,
                     "spec": run.spec_path,
                     "written": run.written,
+                    "log_reading": run.log_reading,
                 });
                 Ok(Report::of_checks(text, to_json(&json)?, code))
             })(),
