@@ -1041,6 +1041,8 @@ impl<R: Read> LogReader<R> {
             ("force", Dimension::Force),
             ("position", Dimension::Length),
         ] {
+            // A column another quantity is mapped to is not a candidate.
+            let taken = [&map.time.name, &map.force.name, &map.position.name].map(String::clone);
             let (column, default) = match what {
                 "time" => (&mut map.time, &defaults.time),
                 "force" => (&mut map.force, &defaults.force),
@@ -1049,7 +1051,11 @@ impl<R: Read> LogReader<R> {
             if column != default || columns.contains(&column.name) {
                 continue;
             }
-            let [(name, unit)] = reading_as(what, &columns)[..] else {
+            let candidates: Vec<_> = reading_as(what, &columns)
+                .into_iter()
+                .filter(|(name, _)| !taken.contains(name))
+                .collect();
+            let [(name, unit)] = candidates[..] else {
                 continue;
             };
             if unit.is_none() && unit_pending.is_none() {
