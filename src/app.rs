@@ -1104,9 +1104,15 @@ pub fn run_validate(
         *exits = stroke_exits;
         true
     };
-    let diagnosis_html = diagnosis.as_ref().map_or(String::new(), |d| {
-        crate::render::html::diagnosis_section(d, &crate::render::calibration::diagnosis_svg(d))
-    });
+    // How the log was read, then the diagnosis, close the page.
+    let diagnosis_html =
+        crate::render::html::log_reading_section(&log_reading.notes, &log_reading.warnings)
+            + &diagnosis.as_ref().map_or(String::new(), |d| {
+                crate::render::html::diagnosis_section(
+                    d,
+                    &crate::render::calibration::diagnosis_svg(d),
+                )
+            });
     // Every verdict also states, and judges, what part of the designed stroke the log covers;
     // then its pass, conclusive and judged flags are settled over all its criteria.
     let judge_coverage = |criteria: &mut Vec<crate::verdict::validate::Criterion>,

@@ -423,6 +423,34 @@ fn criteria_rows(h: &mut String, criteria: &[crate::verdict::validate::Criterion
     }
 }
 
+/// The section of a validation page on how its log was read: the reader's notes (columns
+/// read by their names, a units row) and warnings (dropped samples filled, rows left out,
+/// samples taken at uneven times); empty when it has none.
+pub fn log_reading_section(notes: &[String], warnings: &[String]) -> String {
+    if notes.is_empty() && warnings.is_empty() {
+        return String::new();
+    }
+    // The reader's messages run on from a path on stderr; here each opens a paragraph.
+    let sentence = |m: &str| {
+        let mut chars = m.chars();
+        chars.next().map_or(String::new(), |c| {
+            escape(&(c.to_uppercase().collect::<String>() + chars.as_str()))
+        })
+    };
+    let mut h = String::from("<h2>Reading the log</h2>\n");
+    for n in notes {
+        let _ = writeln!(h, "<p>{}.</p>", sentence(n));
+    }
+    for w in warnings {
+        let _ = writeln!(
+            h,
+            "<p><span class=\"warn\">Warning</span> {}.</p>",
+            sentence(w)
+        );
+    }
+    h
+}
+
 /// `validation.html`: the verdict, the criteria and the plots of `validation.svg`.
 pub fn validation_html(
     v: &crate::verdict::validate::Validation,
