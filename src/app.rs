@@ -342,6 +342,7 @@ impl LogReading {
     /// filled and the rows it left out (the first of `left_out_count`), and the intervals'
     /// scatter.
     pub fn new(
+        preamble: Option<(u64, u64)>,
         recognised: &[crate::estimate::log::RecognisedColumn],
         units_row: Option<&(u64, [String; 3])>,
         filled: &[crate::estimate::log::FilledGap],
@@ -350,10 +351,21 @@ impl LogReading {
         interval_scatter: Option<f64>,
     ) -> LogReading {
         LogReading {
-            notes: [recognised_note(recognised), units_row_note(units_row)]
-                .into_iter()
-                .flatten()
-                .collect(),
+            notes: [
+                preamble.map(|(first, last)| {
+                    format!(
+                        "line(s) {first} to {last}, before the header on line {}, are neither \
+                         comments nor a header naming the columns: read as a preamble and \
+                         skipped",
+                        last + 1
+                    )
+                }),
+                recognised_note(recognised),
+                units_row_note(units_row),
+            ]
+            .into_iter()
+            .flatten()
+            .collect(),
             warnings: [
                 filled_warning(filled, left_out, left_out_count),
                 interval_scatter_warning(interval_scatter),
@@ -370,6 +382,7 @@ impl LogReading {
     /// What reading a log held whole found.
     pub fn of_log(log: &crate::estimate::log::CalibrationLog) -> LogReading {
         LogReading::new(
+            log.preamble,
             &log.recognised,
             log.units_row.as_ref(),
             &log.filled,
@@ -893,6 +906,7 @@ pub fn survey_log_file(
     }
     let surveyed = surveyed.map_err(|e| log_error(log_path, e))?;
     let reading = LogReading::new(
+        reader.preamble(),
         reader.recognised(),
         reader.units_row(),
         reader.filled(),

@@ -735,6 +735,56 @@ fn columns_whose_names_carry_their_units_are_read_by_their_names() {
 }
 
 #[test]
+fn a_preamble_before_the_header_is_skipped_and_named() {
+    let text = base_log();
+    let reference = read(&text).unwrap();
+    // A DAQ's test name, operator, date and rate, not marked as comments, and a blank line.
+    let preamble = "Test name: spring 3\nOperator: JD\nDate: 2026-12-01 08:00\nRate: 100 Hz\n\n";
+    let log = read(&format!("{preamble}{text}")).unwrap();
+    assert_eq!(log.preamble, Some((1, 5)));
+    assert_eq!(log.t_s, reference.t_s);
+    assert_eq!(log.force_n, reference.force_n);
+    // Line numbers stay the file's: a bad number on data row 1000 is on line 5 + 1 + 1000.
+    let mut lines: Vec<String> = format!("{preamble}{text}")
+        .lines()
+        .map(String::from)
+        .collect();
+    let fields: Vec<String> = lines[1005].split(',').map(String::from).collect();
+    lines[1005] = format!("{},ten,{}", fields[0], fields[2]);
+    let err = read(&(lines.join("\n") + "\n")).unwrap_err();
+    assert_eq!(err.line(), Some(1006), "{err}");
+    // A header with a column that has no unit is refused on its own line, not taken for a
+    // preamble.
+    let body = text.split_once('\n').unwrap().1;
+    let err = read(&format!("{preamble}t_s,force_n,pos\n{body}")).unwrap_err();
+    assert_eq!(err.line(), Some(6), "{err}");
+    assert!(matches!(err, LogError::MissingColumn { .. }), "{err}");
+    // A header that lacks a column after a preamble is refused on its own line, the one
+    // that names the most columns, with the rows read past it still read in order.
+    let err = read(&format!("{preamble}t_s,force_n,q\n{body}"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.starts_with("line 6: no column \"position_mm\"") && err.contains("\"q\""),
+        "{err}"
+    );
+    // A preamble longer than the reader looks ahead is not skipped.
+    let long: String = (0..70).map(|i| format!("setting {i}: on\n")).collect();
+    let err = read(&format!("{long}{text}")).unwrap_err();
+    assert_eq!(err.line(), Some(1), "{err}");
+    // A header that reads only by name after skipping a mapped column's candidate: the rows
+    // read ahead are read again as data.
+    let map = common::column_map("t_s", "force_n", "x_mm:mm");
+    let two = format!(
+        "t_s,force_n,x_mm,x_um\n{}",
+        body.lines().map(|l| format!("{l},0\n")).collect::<String>()
+    );
+    let log = read_log(two.as_bytes(), &map, 0.1, |_| {}).unwrap();
+    assert_eq!(log.position_mm, reference.position_mm);
+    assert_eq!(log.preamble, None);
+}
+
+#[test]
 fn a_missing_column_message_gives_the_option_for_the_column_that_reads_as_it() {
     let text = base_log();
     let body = text.split_once('\n').unwrap().1;

@@ -150,6 +150,63 @@ fn is_comment_or_blank(line: &[u8]) -> bool {
     }
 }
 
+/// How many lines after the first line that could be a header a header that names the mapped
+/// columns is looked for ([`LogReader::new`]): a DAQ's preamble of a few lines of test name,
+/// date and rate is skipped, and a log whose header lacks a column is still refused at once.
+pub const PREAMBLE_LINES: u64 = 64;
+
+/// The separator of a header line: the map's, a `sep=` line's (`named`), or detected.
+/// Column-aligned text may hold a stray tab or comma between blanks: where the detected
+/// separator does not give the mapped columns and runs of blanks do, the blanks separate.
+fn separator_of(header: &str, map: &ColumnMap, named: Option<Delimiter>) -> Delimiter {
+    match (map.delimiter, named) {
+        (Delimiter::Auto, Some(d)) => d,
+        (Delimiter::Auto, None) => {
+            let detected = Delimiter::Auto.resolve(header);
+            let has_columns = |fields: Vec<&str>| {
+                let fields: Vec<&str> = fields.iter().map(|f| f.trim().trim_matches('"')).collect();
+                [&map.time, &map.force, &map.position]
+                    .iter()
+                    .all(|c| fields.contains(&c.name.as_str()))
+            };
+            let split = header.trim().split(char::from(detected.byte())).collect();
+            if detected != Delimiter::Whitespace
+                && !has_columns(split)
+                && has_columns(header.split_whitespace().collect())
+            {
+                Delimiter::Whitespace
+            } else {
+                detected
+            }
+        }
+        (given, _) => given.resolve(header),
+    }
+}
+
+/// How many of the map's three columns a line split at `separator` names: each by its name,
+/// or, where the map has a column's default name, by the one field whose name reads as it.
+fn named_columns(line: &str, separator: Delimiter, map: &ColumnMap) -> usize {
+    let fields: Vec<String> = if separator == Delimiter::Whitespace {
+        line.split_whitespace().map(str::to_string).collect()
+    } else {
+        line.trim()
+            .split(char::from(separator.byte()))
+            .map(|f| f.trim().trim_matches('"').trim().to_string())
+            .collect()
+    };
+    let defaults = ColumnMap::default();
+    [
+        ("time", &map.time, &defaults.time),
+        ("force", &map.force, &defaults.force),
+        ("position", &map.position, &defaults.position),
+    ]
+    .iter()
+    .filter(|(what, column, default)| {
+        fields.contains(&column.name) || (column == default && reading_as(what, &fields).len() == 1)
+    })
+    .count()
+}
+
 /// A reader that blanks comment lines (keeping their line breaks, so that line numbers stay
 /// those of the file; the CSV reader skips blank lines).
 struct WithoutComments<R> {
@@ -688,6 +745,9 @@ pub struct CalibrationLog {
     /// fraction of the mean ([`LogReader::interval_scatter`]).
     #[serde(skip)]
     pub interval_scatter: Option<f64>,
+    /// The lines skipped before the header ([`LogReader::preamble`]).
+    #[serde(skip)]
+    pub preamble: Option<(u64, u64)>,
 }
 
 /// A column the reader took for a quantity by its name, the header lacking the column the map
@@ -837,7 +897,10 @@ type Decoded<R> = encoding_rs_io::DecodeReaderBytes<std::io::BufReader<R>, Vec<u
 
 /// The source of the CSV records: the header line, then the rest with comments blanked.
 type Records<R> = csv::Reader<
-    std::io::Chain<std::io::Cursor<Vec<u8>>, WithoutComments<std::io::BufReader<Decoded<R>>>>,
+    std::io::Chain<
+        std::io::Cursor<Vec<u8>>,
+        WithoutComments<std::io::Chain<std::io::Cursor<Vec<u8>>, std::io::BufReader<Decoded<R>>>>,
+    >,
 >;
 
 /// The file read as UTF-8 text, and whether it was UTF-16. A byte-order mark names UTF-8 or
@@ -916,6 +979,8 @@ pub struct LogReader<R: Read> {
     unit_pending: Option<LogError>,
     /// The single sampling intervals (no gap in them): their sum, sum of squares and count.
     interval_sums: (f64, f64, u64),
+    /// The lines skipped before the header ([`LogReader::preamble`]).
+    preamble: Option<(u64, u64)>,
     /// Rows with no value since the last complete one: their lines (the first few) and count.
     empty: (Vec<u64>, usize),
     /// Rows with no value before the first complete row or after the last: not filled.
@@ -946,65 +1011,68 @@ impl<R: Read> LogReader<R> {
         let (decoded, utf16) = decode(reader).map_err(|e| LogError::Io(format!("line 1: {e}")))?;
         let mut lines = std::io::BufReader::new(decoded);
         // The header is the first line that is not a comment or blank (or a spreadsheet's
-        // `sep=X` line, which names the separator).
-        let mut header_line = 0u64;
-        let mut header_text = Vec::new();
+        // `sep=X` line, which names the separator) and names the mapped columns. Where that
+        // line does not, a line within the next [`PREAMBLE_LINES`] that does is the header,
+        // and the lines before it a preamble (a DAQ's test name, date and rate, uncommented).
+        // Where none does, the line that names the most of them (the first of equals) is,
+        // refused for the column it lacks, and the lines read after it are read again.
+        let mut line = 0u64;
+        let mut text = Vec::new();
         let mut named = None;
-        loop {
-            header_text.clear();
-            let n = std::io::BufRead::read_until(&mut lines, b'\n', &mut header_text)
-                .map_err(|e| LogError::Io(format!("line {}: {e}", header_line + 1)))?;
-            header_line += 1;
-            if n == 0 {
-                return Err(LogError::Io(format!(
-                    "line {header_line}: no header line (the log is empty or holds only comments); \
-                     expected a header such as t_s,force_n,position_mm"
-                )));
+        let mut first_line = None;
+        let mut best: Option<(usize, u64, Vec<u8>)> = None;
+        let mut after_best = Vec::new();
+        let (header_line, mut header_text, replay, preamble) = loop {
+            text.clear();
+            let n = std::io::BufRead::read_until(&mut lines, b'\n', &mut text)
+                .map_err(|e| LogError::Io(format!("line {}: {e}", line + 1)))?;
+            line += 1;
+            let looked_ahead = first_line.is_some_and(|f| line - f > PREAMBLE_LINES);
+            if n == 0 || looked_ahead {
+                let Some((_, at, header)) = best.take() else {
+                    return Err(LogError::Io(format!(
+                        "line {line}: no header line (the log is empty or holds only comments); \
+                         expected a header such as t_s,force_n,position_mm"
+                    )));
+                };
+                after_best.extend_from_slice(&text);
+                break (at, header, std::mem::take(&mut after_best), None);
             }
-            if is_comment_or_blank(&header_text) {
+            if best.is_some() {
+                after_best.extend_from_slice(&text);
+            }
+            if is_comment_or_blank(&text) {
                 continue;
             }
-            match Delimiter::from_sep_line(&String::from_utf8_lossy(&header_text)) {
-                Some(Some(d)) if named.is_none() => named = Some(d),
-                Some(None) => {
-                    return Err(LogError::SeparatorLine {
-                        line: header_line,
-                        found: String::from_utf8_lossy(&header_text).trim().to_string(),
-                    })
-                }
-                _ => break,
-            }
-        }
-        let header_str = String::from_utf8_lossy(&header_text).into_owned();
-        let separator = match (map.delimiter, named) {
-            (Delimiter::Auto, Some(d)) => d,
-            (Delimiter::Auto, None) => {
-                // Column-aligned text may hold a stray tab or comma between blanks: where the
-                // detected separator does not give the mapped columns and runs of blanks do,
-                // the blanks separate.
-                let detected = Delimiter::Auto.resolve(&header_str);
-                let has_columns = |fields: Vec<&str>| {
-                    let fields: Vec<&str> =
-                        fields.iter().map(|f| f.trim().trim_matches('"')).collect();
-                    [&map.time, &map.force, &map.position]
-                        .iter()
-                        .all(|c| fields.contains(&c.name.as_str()))
-                };
-                let split = header_str
-                    .trim()
-                    .split(char::from(detected.byte()))
-                    .collect();
-                if detected != Delimiter::Whitespace
-                    && !has_columns(split)
-                    && has_columns(header_str.split_whitespace().collect())
-                {
-                    Delimiter::Whitespace
-                } else {
-                    detected
+            let line_str = String::from_utf8_lossy(&text).into_owned();
+            if first_line.is_none() {
+                match Delimiter::from_sep_line(&line_str) {
+                    Some(Some(d)) if named.is_none() => {
+                        named = Some(d);
+                        continue;
+                    }
+                    Some(None) => {
+                        return Err(LogError::SeparatorLine {
+                            line,
+                            found: line_str.trim().to_string(),
+                        })
+                    }
+                    _ => {}
                 }
             }
-            (given, _) => given.resolve(&header_str),
+            let count = named_columns(&line_str, separator_of(&line_str, map, named), map);
+            if count == 3 {
+                let preamble = first_line.map(|f| (f, line - 1));
+                break (line, text.clone(), Vec::new(), preamble);
+            }
+            first_line.get_or_insert(line);
+            if best.as_ref().is_none_or(|(most, _, _)| count > *most) {
+                best = Some((count, line, text.clone()));
+                after_best.clear();
+            }
         };
+        let header_str = String::from_utf8_lossy(&header_text).into_owned();
+        let separator = separator_of(&header_str, map, named);
         let delimiter = separator.byte();
         let collapse = separator == Delimiter::Whitespace;
         if collapse {
@@ -1013,7 +1081,7 @@ impl<R: Read> LogReader<R> {
         // The CSV reader sees the header, then the rest with comments blanked; its line numbers
         // are offset by the lines before the header.
         let body = WithoutComments {
-            inner: lines,
+            inner: std::io::Cursor::new(replay).chain(lines),
             line: Vec::new(),
             at: 0,
             collapse,
@@ -1146,6 +1214,7 @@ impl<R: Read> LogReader<R> {
             recognised,
             unit_pending,
             interval_sums: (0.0, 0.0, 0),
+            preamble,
             empty: (Vec::new(), 0),
             left_out: Vec::new(),
             left_out_count: 0,
@@ -1187,6 +1256,13 @@ impl<R: Read> LogReader<R> {
             0.0
         };
         Some((variance - 0.25 * resolution * resolution).max(0.0).sqrt() / mean)
+    }
+
+    /// The first and last line of a preamble before the header: lines that were neither
+    /// comments nor a header naming the mapped columns, followed within [`PREAMBLE_LINES`] by
+    /// one that is. None where the header was the first such line.
+    pub fn preamble(&self) -> Option<(u64, u64)> {
+        self.preamble
     }
 
     /// Dropped samples filled in so far.
@@ -1567,6 +1643,7 @@ pub fn collect_log<R: Read>(
     log.units_row = reader.units_row().cloned();
     log.recognised = reader.recognised.clone();
     log.interval_scatter = reader.interval_scatter();
+    log.preamble = reader.preamble();
     log.filled = reader.filled;
     Ok(log)
 }

@@ -945,6 +945,7 @@ pub fn retime_log(log: &CalibrationLog, delay: RowDelay) -> CalibrationLog {
         units_row: log.units_row.clone(),
         recognised: log.recognised.clone(),
         interval_scatter: log.interval_scatter,
+        preamble: log.preamble,
         ..CalibrationLog::default()
     };
     for s in ForceRetimer::new(samples, delay).flatten() {
