@@ -457,6 +457,9 @@ mod never_panics {
                 Just("t_s,force_n,position_mm\n"), Just("t_s;force_n;position_mm;\n"),
                 Just("  t_s   force_n\tposition_mm\n"), Just("sep=;\nt_s;force_n;position_mm\n"),
                 Just("sep=|\nt_s|force_n|position_mm\n"), Just("# rig\r\nt_s\tforce_n\tposition_mm\r\n"),
+                Just("Test: 3\nRate: 100 Hz\nTime [s],Load (kN),x_in\n"),
+                Just("\"Time\",\"Extension\",\"Load\"\n\"(sec)\",\"(mm)\",\"(N)\"\n"),
+                Just("Time,Load,x\n"),
             ],
             cells in proptest::collection::vec(
                 prop_oneof![
