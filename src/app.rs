@@ -341,8 +341,10 @@ impl LogReading {
     /// What the reader found: the columns it read by their names, the units row, the gaps it
     /// filled and the rows it left out (the first of `left_out_count`), and the intervals'
     /// scatter.
+    #[allow(clippy::too_many_arguments)]
     pub fn new(
         preamble: Option<(u64, u64)>,
+        rows_at_hz: Option<f64>,
         recognised: &[crate::estimate::log::RecognisedColumn],
         units_row: Option<&(u64, [String; 3])>,
         filled: &[crate::estimate::log::FilledGap],
@@ -353,11 +355,22 @@ impl LogReading {
         LogReading {
             notes: [
                 preamble.map(|(first, last)| {
+                    let lines = if first == last {
+                        format!("line {first}")
+                    } else {
+                        format!("lines {first} to {last}")
+                    };
                     format!(
-                        "line(s) {first} to {last}, before the header on line {}, are neither \
-                         comments nor a header naming the columns: read as a preamble and \
-                         skipped",
+                        "{lines} before the header on line {}: not comments, and not a header \
+                         naming the columns; read as a preamble and skipped",
                         last + 1
+                    )
+                }),
+                rows_at_hz.map(|rate| {
+                    format!(
+                        "no time column: the rows are read as samples at {rate} Hz \
+                         (--sample-rate), the first at t = 0; a row with no value is a dropped \
+                         sample, but a row the logger left out cannot be seen"
                     )
                 }),
                 recognised_note(recognised),
@@ -383,6 +396,7 @@ impl LogReading {
     pub fn of_log(log: &crate::estimate::log::CalibrationLog) -> LogReading {
         LogReading::new(
             log.preamble,
+            log.rows_at_hz,
             &log.recognised,
             log.units_row.as_ref(),
             &log.filled,
@@ -907,6 +921,7 @@ pub fn survey_log_file(
     let surveyed = surveyed.map_err(|e| log_error(log_path, e))?;
     let reading = LogReading::new(
         reader.preamble(),
+        reader.rows_at_hz(),
         reader.recognised(),
         reader.units_row(),
         reader.filled(),

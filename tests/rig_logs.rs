@@ -785,6 +785,53 @@ fn a_preamble_before_the_header_is_skipped_and_named() {
 }
 
 #[test]
+fn a_log_without_a_time_column_is_read_at_the_sample_rate_given() {
+    let text = base_log();
+    let reference = read(&text).unwrap();
+    // Force and position only, as a LabVIEW spreadsheet file writes them, with a units row, a
+    // reading lost as NaN on data row 300, and the force in kN.
+    let mut rows = String::from("Load\tx\n[kN]\t[mm]\n");
+    for (i, l) in text.lines().skip(1).enumerate() {
+        let v: Vec<f64> = l.split(',').map(|f| f.parse().unwrap()).collect();
+        if i == 300 {
+            rows.push_str("NaN\tNaN\n");
+        } else {
+            rows.push_str(&format!("{}\t{}\n", v[1] / 1000.0, v[2]));
+        }
+    }
+    let map = ColumnMap {
+        rows_at_hz: Some(100.0),
+        ..ColumnMap::default()
+    };
+    let log = read_log(rows.as_bytes(), &map, 0.1, |_| {}).unwrap();
+    assert_eq!(log.len(), reference.len());
+    assert_eq!(log.filled.len(), 1);
+    for i in [0, 299, 301, 5000, reference.len() - 1] {
+        assert!((log.t_s[i] - reference.t_s[i]).abs() < 1e-9, "row {i}");
+        assert!(
+            (log.force_n[i] - reference.force_n[i]).abs() < 1e-9,
+            "row {i}"
+        );
+        assert_eq!(log.position_mm[i], reference.position_mm[i], "row {i}");
+    }
+    // Without the rate, the missing time column names the option.
+    let err = read(&rows).unwrap_err().to_string();
+    assert!(err.contains("--sample-rate RATE"), "{err}");
+    // The command takes the rate, and refuses it with a time column given.
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("rows.tsv"), &rows).unwrap();
+    let out = camspring(dir.path(), &["noise", "rows.tsv", "--sample-rate", "100Hz"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert!(stderr.contains("no time column: the rows are read as samples at 100 Hz"));
+    let out = camspring(
+        dir.path(),
+        &["noise", "rows.tsv", "--sample-rate", "100Hz", "--time", "t"],
+    );
+    assert_eq!(out.status.code(), Some(2));
+}
+
+#[test]
 fn a_missing_column_message_gives_the_option_for_the_column_that_reads_as_it() {
     let text = base_log();
     let body = text.split_once('\n').unwrap().1;

@@ -38,6 +38,10 @@ pub struct ColumnMap {
     pub position: Column,
     /// Field separator.
     pub delimiter: Delimiter,
+    /// A log without a time column: its rows are samples at this rate (Hz), the first at
+    /// t = 0, and `time` is not read. A row with no value is a dropped sample; a missing row
+    /// cannot be seen.
+    pub rows_at_hz: Option<f64>,
 }
 
 /// The field separator of a log.
@@ -202,7 +206,9 @@ fn named_columns(line: &str, separator: Delimiter, map: &ColumnMap) -> usize {
     ]
     .iter()
     .filter(|(what, column, default)| {
-        fields.contains(&column.name) || (column == default && reading_as(what, &fields).len() == 1)
+        (*what == "time" && map.rows_at_hz.is_some())
+            || fields.contains(&column.name)
+            || (column == default && reading_as(what, &fields).len() == 1)
     })
     .count()
 }
@@ -345,6 +351,7 @@ impl Default for ColumnMap {
                 factor: 1.0,
             },
             delimiter: Delimiter::Auto,
+            rows_at_hz: None,
         }
     }
 }
@@ -439,6 +446,10 @@ fn column_hint(what: &str, columns: &[String]) -> String {
             "; \"{name}\" reads as the {what}: give --{what} \"{name}:UNIT\" with its unit ({})",
             dim.unit_list()
         ),
+        _ if what == "time" => "; give --time NAME:UNIT to map the time column, or \
+                                --sample-rate RATE for a log whose rows are samples at a rate \
+                                and that has no time column"
+            .to_string(),
         _ => format!("; give --{what} NAME:UNIT to map the {what} column"),
     }
 }
@@ -748,6 +759,10 @@ pub struct CalibrationLog {
     /// The lines skipped before the header ([`LogReader::preamble`]).
     #[serde(skip)]
     pub preamble: Option<(u64, u64)>,
+    /// The rate its rows were read at, for a log without a time column
+    /// ([`ColumnMap::rows_at_hz`]).
+    #[serde(skip)]
+    pub rows_at_hz: Option<f64>,
 }
 
 /// A column the reader took for a quantity by its name, the header lacking the column the map
@@ -814,10 +829,18 @@ pub struct Sample {
 /// The units of a units row (the row under the header of some loggers: `s;N;mm`, `[s] [N]
 /// [mm]`): each mapped field a unit of its column's dimension, brackets allowed, with its
 /// factor to s, N or mm. None when any field is not one.
-fn units_row(record: &csv::StringRecord, cols: &[usize; 3]) -> Option<[(String, f64); 3]> {
+fn units_row(
+    record: &csv::StringRecord,
+    cols: &[usize; 3],
+    timed: bool,
+) -> Option<[(String, f64); 3]> {
     let dims = [Dimension::Time, Dimension::Force, Dimension::Length];
     let mut out: [(String, f64); 3] = Default::default();
-    for k in 0..3 {
+    // Without a time column, the time's unit is the seconds the rows' times are in.
+    if !timed {
+        out[0] = ("s".to_string(), 1.0);
+    }
+    for k in usize::from(!timed)..3 {
         let text = record.get(cols[k])?.trim();
         let unit = text
             .trim_start_matches(['[', '('])
@@ -981,6 +1004,10 @@ pub struct LogReader<R: Read> {
     interval_sums: (f64, f64, u64),
     /// The lines skipped before the header ([`LogReader::preamble`]).
     preamble: Option<(u64, u64)>,
+    /// Rows at a given rate, with no time column ([`ColumnMap::rows_at_hz`]), and the data
+    /// rows read so far.
+    rows_at_hz: Option<f64>,
+    rows: u64,
     /// Rows with no value since the last complete one: their lines (the first few) and count.
     empty: (Vec<u64>, usize),
     /// Rows with no value before the first complete row or after the last: not filled.
@@ -1116,7 +1143,10 @@ impl<R: Read> LogReader<R> {
                 "force" => (&mut map.force, &defaults.force),
                 _ => (&mut map.position, &defaults.position),
             };
-            if column != default || columns.contains(&column.name) {
+            if column != default
+                || columns.contains(&column.name)
+                || (what == "time" && map.rows_at_hz.is_some())
+            {
                 continue;
             }
             let candidates: Vec<_> = reading_as(what, &columns)
@@ -1180,7 +1210,10 @@ impl<R: Read> LogReader<R> {
             columns.len()
         };
         let cols = [
-            find(&map.time, "time")?,
+            match map.rows_at_hz {
+                Some(_) => usize::MAX,
+                None => find(&map.time, "time")?,
+            },
             find(&map.force, "force")?,
             find(&map.position, "position")?,
         ];
@@ -1215,6 +1248,8 @@ impl<R: Read> LogReader<R> {
             unit_pending,
             interval_sums: (0.0, 0.0, 0),
             preamble,
+            rows_at_hz: map.rows_at_hz,
+            rows: 0,
             empty: (Vec::new(), 0),
             left_out: Vec::new(),
             left_out_count: 0,
@@ -1263,6 +1298,12 @@ impl<R: Read> LogReader<R> {
     /// one that is. None where the header was the first such line.
     pub fn preamble(&self) -> Option<(u64, u64)> {
         self.preamble
+    }
+
+    /// The rate the rows are read at, for a log without a time column
+    /// ([`ColumnMap::rows_at_hz`]).
+    pub fn rows_at_hz(&self) -> Option<f64> {
+        self.rows_at_hz
     }
 
     /// Dropped samples filled in so far.
@@ -1327,7 +1368,7 @@ impl<R: Read> LogReader<R> {
             });
         }
         // A row that repeats the header: two runs in one file.
-        if record.get(self.cols[0]).map(str::trim) == Some(self.header[self.cols[0]].as_str())
+        if record.get(self.cols[1]).map(str::trim) == Some(self.header[self.cols[1]].as_str())
             && record
                 .iter()
                 .zip(&self.header)
@@ -1337,7 +1378,7 @@ impl<R: Read> LogReader<R> {
         }
         if !self.units_checked {
             self.units_checked = true;
-            if let Some(units) = units_row(record, &self.cols) {
+            if let Some(units) = units_row(record, &self.cols, self.rows_at_hz.is_none()) {
                 for (k, (_, factor)) in units.iter().enumerate() {
                     if self.factors[k] == 1.0 {
                         self.factors[k] = *factor;
@@ -1361,7 +1402,13 @@ impl<R: Read> LogReader<R> {
         let mut v = [0.0; 3];
         let mut resolution_s = 0.0;
         let mut no_value = false;
+        self.rows += 1;
         for k in 0..3 {
+            if let (0, Some(rate)) = (k, self.rows_at_hz) {
+                // No time column: the row's number at the given rate.
+                v[0] = (self.rows - 1) as f64 / rate;
+                continue;
+            }
             let text = record.get(self.cols[k]).unwrap_or("").trim();
             if is_no_value(text) {
                 no_value = true;
@@ -1644,6 +1691,7 @@ pub fn collect_log<R: Read>(
     log.recognised = reader.recognised.clone();
     log.interval_scatter = reader.interval_scatter();
     log.preamble = reader.preamble();
+    log.rows_at_hz = reader.rows_at_hz();
     log.filled = reader.filled;
     Ok(log)
 }

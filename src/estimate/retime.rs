@@ -946,6 +946,7 @@ pub fn retime_log(log: &CalibrationLog, delay: RowDelay) -> CalibrationLog {
         recognised: log.recognised.clone(),
         interval_scatter: log.interval_scatter,
         preamble: log.preamble,
+        rows_at_hz: log.rows_at_hz,
         ..CalibrationLog::default()
     };
     for s in ForceRetimer::new(samples, delay).flatten() {

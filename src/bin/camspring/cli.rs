@@ -598,6 +598,10 @@ pub struct Columns {
     /// Field separator of the log (auto: detected from the header line).
     #[arg(long, value_enum, default_value_t = DelimiterArg::Auto)]
     pub delimiter: DelimiterArg,
+    /// A log without a time column, e.g. 1kHz: its rows are samples at this rate, the first
+    /// at t = 0 (a row with no value is a dropped sample; a missing row cannot be seen).
+    #[arg(long, value_name = "RATE", value_parser = rate, conflicts_with = "time")]
+    pub sample_rate: Option<f64>,
 }
 
 /// Field separator of a log.

@@ -299,6 +299,7 @@ fn columns(c: &Columns) -> Result<ColumnMap, Error> {
         force: parse_column(&c.force, Dimension::Force, "force").map_err(arg)?,
         position: parse_column(&c.position, Dimension::Length, "position").map_err(arg)?,
         delimiter: c.delimiter.into(),
+        rows_at_hz: c.sample_rate,
     })
 }
 
