@@ -496,7 +496,8 @@ impl Simulator {
 
     /// Sample `i`; samples must be taken in order from 0 (the noise is drawn as they come).
     pub fn sample(&mut self, i: usize) -> Result<SimSample, SimError> {
-        let t = i as f64 / self.settings.rate_hz;
+        let dt = 1.0 / self.settings.rate_hz;
+        let t = i as f64 * dt;
         let mut direction = self.direction;
         let Motion { x, xd, f } = self
             .motion(i, self.settings.speed, &mut direction)
