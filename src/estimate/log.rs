@@ -391,28 +391,42 @@ fn unit_in_name(tokens: &[&str], dim: Dimension) -> Option<&'static str> {
         .find_map(|t| unit_of(t, dim).map(|(u, _)| u))
 }
 
+/// The three quantities a log's columns give, in the order of a [`ColumnMap`], with their
+/// dimensions.
+const QUANTITIES: [(&str, Dimension); 3] = [
+    ("time", Dimension::Time),
+    ("force", Dimension::Force),
+    ("position", Dimension::Length),
+];
+
+/// The dimension of a quantity of [`QUANTITIES`] (length for position).
+fn dimension_of(what: &str) -> Dimension {
+    QUANTITIES
+        .iter()
+        .find(|(q, _)| *q == what)
+        .map_or(Dimension::Length, |(_, d)| *d)
+}
+
 /// The header's columns whose names read as a quantity (`time`, `force` or `position`): the
 /// first word of the name is one of the quantity's (`Time [ms]`, `Load (N)`, `x_in`,
 /// `Extension (mm)`), each with the unit its name carries, when it carries one of the
 /// quantity's.
 fn reading_as<'a>(what: &str, columns: &'a [String]) -> Vec<(&'a String, Option<&'static str>)> {
-    let (dim, words): (Dimension, &[&str]) = match what {
-        "time" => (Dimension::Time, &["t", "time", "timestamp", "elapsed"]),
-        "force" => (Dimension::Force, &["f", "force", "load", "fz"]),
-        _ => (
-            Dimension::Length,
-            &[
-                "x",
-                "pos",
-                "position",
-                "displacement",
-                "deflection",
-                "stroke",
-                "travel",
-                "extension",
-                "elongation",
-            ],
-        ),
+    let dim = dimension_of(what);
+    let words: &[&str] = match what {
+        "time" => &["t", "time", "timestamp", "elapsed"],
+        "force" => &["f", "force", "load", "fz"],
+        _ => &[
+            "x",
+            "pos",
+            "position",
+            "displacement",
+            "deflection",
+            "stroke",
+            "travel",
+            "extension",
+            "elongation",
+        ],
     };
     columns
         .iter()
@@ -433,11 +447,7 @@ fn reading_as<'a>(what: &str, columns: &'a [String]) -> Vec<(&'a String, Option<
 /// A hint for a missing column: the header's column whose name reads as the quantity, and the
 /// option that maps it, with the unit its name carries.
 fn column_hint(what: &str, columns: &[String]) -> String {
-    let dim = match what {
-        "time" => Dimension::Time,
-        "force" => Dimension::Force,
-        _ => Dimension::Length,
-    };
+    let dim = dimension_of(what);
     match reading_as(what, columns).as_slice() {
         [(name, Some(unit))] => {
             format!("; \"{name}\" reads as the {what} in {unit}: give --{what} \"{name}:{unit}\"")
@@ -828,13 +838,13 @@ pub struct Sample {
 
 /// The units of a units row (the row under the header of some loggers: `s;N;mm`, `[s] [N]
 /// [mm]`): each mapped field a unit of its column's dimension, brackets allowed, with its
-/// factor to s, N or mm. None when any field is not one.
+/// factor to s, N or mm (without a time column, `timed` false, force and position only).
+/// None when any field is not one.
 fn units_row(
     record: &csv::StringRecord,
     cols: &[usize; 3],
     timed: bool,
 ) -> Option<[(String, f64); 3]> {
-    let dims = [Dimension::Time, Dimension::Force, Dimension::Length];
     let mut out: [(String, f64); 3] = Default::default();
     // Without a time column, the time's unit is the seconds the rows' times are in.
     if !timed {
@@ -849,7 +859,7 @@ fn units_row(
         if unit.is_empty() || unit.parse::<f64>().is_ok() {
             return None;
         }
-        let (name, factor) = unit_of(unit, dims[k])?;
+        let (name, factor) = unit_of(unit, QUANTITIES[k].1)?;
         out[k] = (name.to_string(), factor);
     }
     Some(out)
@@ -1131,11 +1141,7 @@ impl<R: Read> LogReader<R> {
         let mut map = map.clone();
         let mut recognised = Vec::new();
         let mut unit_pending = None;
-        for (what, dim) in [
-            ("time", Dimension::Time),
-            ("force", Dimension::Force),
-            ("position", Dimension::Length),
-        ] {
+        for (what, dim) in QUANTITIES {
             // A column another quantity is mapped to is not a candidate.
             let taken = [&map.time.name, &map.force.name, &map.position.name].map(String::clone);
             let (column, default) = match what {
@@ -1385,9 +1391,9 @@ impl<R: Read> LogReader<R> {
                     }
                 }
                 for r in self.recognised.iter_mut().filter(|r| r.from_units_row) {
-                    let k = ["time", "force", "position"]
+                    let k = QUANTITIES
                         .iter()
-                        .position(|q| *q == r.quantity)
+                        .position(|(q, _)| *q == r.quantity)
                         .unwrap_or(0);
                     r.unit = units[k].0.clone();
                 }
