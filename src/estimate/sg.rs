@@ -367,6 +367,78 @@ impl SlidingWindow {
     }
 }
 
+/// The least-squares polynomial of [`ORDER`] through one window of a record (every
+/// `stride`-th sample, centred), kept as coefficients so that it can be read anywhere in the
+/// window, not only at its centre.
+///
+/// A streamed record's first and last half window have no window centred on them. They take
+/// the fit of the first and of the last window at their own offsets, Savitzky-Golay's usual
+/// treatment of a record's ends. The centre's value held over the half window instead is a
+/// position that stands still: on a slow run with a window of two seconds it was a millimetre
+/// off at the record's start, enough to read the friction's sign wrong there.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WindowFit {
+    /// Coefficients of u^0 ..= u^ORDER, with u the offset (samples) over `scale`.
+    coefficients: [f64; ORDER + 1],
+    /// Half the window (samples).
+    scale: f64,
+}
+
+impl WindowFit {
+    /// The fit to `values` (oldest first, an odd count whose half is a multiple of `stride`),
+    /// read at every `stride`-th value from the first. None where the window holds fewer than
+    /// [`ORDER`] + 1 points or is not centred.
+    pub fn new(values: &[f64], stride: usize) -> Option<WindowFit> {
+        let stride = stride.max(1);
+        let n = values.len();
+        let centre = n.checked_sub(1)? / 2;
+        if n % 2 == 0 || centre % stride != 0 {
+            return None;
+        }
+        let points = n.div_ceil(stride);
+        if points < ORDER + 1 {
+            return None;
+        }
+        let scale = centre.max(1) as f64;
+        let a = DMatrix::from_fn(points, ORDER + 1, |i, j| {
+            ((i * stride) as f64 / scale - centre as f64 / scale).powi(j as i32)
+        });
+        let b = DMatrix::from_fn(points, 1, |i, _| values[i * stride]);
+        let solution = (a.transpose() * &a).cholesky()?.solve(&(a.transpose() * b));
+        let mut coefficients = [0.0; ORDER + 1];
+        for (c, v) in coefficients.iter_mut().zip(solution.iter()) {
+            *c = *v;
+        }
+        coefficients
+            .iter()
+            .all(|c| c.is_finite())
+            .then_some(WindowFit {
+                coefficients,
+                scale,
+            })
+    }
+
+    /// The fitted value at `offset` samples from the window's centre.
+    pub fn value(&self, offset: f64) -> f64 {
+        self.motion(offset, 1.0)[0]
+    }
+
+    /// The fitted value, its first and its second derivative in time at `offset` samples from
+    /// the window's centre, for samples `dt` apart.
+    pub fn motion(&self, offset: f64, dt: f64) -> [f64; 3] {
+        let u = offset / self.scale;
+        // Horner's rule for the polynomial p, p' and p'' / 2 in u.
+        let (mut p, mut dp, mut half_ddp) = (0.0, 0.0, 0.0);
+        for &c in self.coefficients.iter().rev() {
+            half_ddp = half_ddp * u + dp;
+            dp = dp * u + p;
+            p = p * u + c;
+        }
+        let per_time = 1.0 / (self.scale * dt);
+        [p, dp * per_time, 2.0 * half_ddp * per_time * per_time]
+    }
+}
+
 /// Kernel `k`'s weights `w` (every `taps`-th from its first, [`Differentiator::taps`]) against
 /// every `stride`-th value of `values` (oldest first): the same sum as over all weights.
 pub fn strided_sum(w: &[f64], (first, step): (usize, usize), values: &[f64], stride: usize) -> f64 {
@@ -381,6 +453,32 @@ pub fn strided_sum(w: &[f64], (first, step): (usize, usize), values: &[f64], str
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_window_fit_reads_a_quintic_exactly_anywhere_in_the_window() {
+        // x(t) = 1 + 2t - 3t^2 + 0.5t^3 - 0.2t^4 + 0.05t^5, sampled every 0.01 s; the window
+        // of 201 samples read at every 4th, centred on t = 1.
+        let dt = 0.01;
+        let x = |t: f64| {
+            1.0 + 2.0 * t - 3.0 * t * t + 0.5 * t.powi(3) - 0.2 * t.powi(4) + 0.05 * t.powi(5)
+        };
+        let v = |t: f64| 2.0 - 6.0 * t + 1.5 * t * t - 0.8 * t.powi(3) + 0.25 * t.powi(4);
+        let a = |t: f64| -6.0 + 3.0 * t - 2.4 * t * t + t.powi(3);
+        let values: Vec<f64> = (0..201).map(|i| x(i as f64 * dt)).collect();
+        let fit = WindowFit::new(&values, 4).expect("a centred window of 51 points");
+        for offset in [-100.0, -73.0, -1.0, 0.0, 37.5, 100.0] {
+            let t = 1.0 + offset * dt;
+            let [xf, vf, af] = fit.motion(offset, dt);
+            assert!((xf - x(t)).abs() < 1e-9, "x at {offset}: {xf} vs {}", x(t));
+            assert!((vf - v(t)).abs() < 1e-7, "v at {offset}: {vf} vs {}", v(t));
+            assert!((af - a(t)).abs() < 1e-5, "a at {offset}: {af} vs {}", a(t));
+            assert_eq!(fit.value(offset), xf);
+        }
+        // Not centred on a strided point, an even count, or too few points: no fit.
+        assert!(WindowFit::new(&values[..199], 4).is_none());
+        assert!(WindowFit::new(&values[..200], 1).is_none());
+        assert!(WindowFit::new(&values[..9], 2).is_none());
+    }
 
     #[test]
     fn kernels_are_exact_on_cubics() {

@@ -118,7 +118,8 @@ pub struct TwinSource {
     reach: usize,
     positions: sg::SlidingWindow,
     waiting: VecDeque<(usize, f64)>,
-    last: Option<f64>,
+    /// The centre (sample index) of the last full window, and its smoothed position.
+    last: Option<(usize, f64)>,
     motion: MotionFilter,
     band_mm_per_s: f64,
     /// The friction's sign now: that of the sliding direction, 0 at rest.
@@ -210,24 +211,41 @@ impl TwinSource {
             self.stride,
         );
         let centre = i - self.reach;
-        // The first smoothed value also stands for the samples before its centre.
+        // The samples before the first window's centre take that window's fit at their own
+        // times ([`sg::WindowFit`]).
+        let first = match self.last {
+            None => sg::WindowFit::new(self.positions.values(), self.stride),
+            Some(_) => None,
+        };
         while let Some(&(j, t)) = self.waiting.front() {
             if j > centre {
                 break;
             }
             self.waiting.pop_front();
-            self.emit(j, t, smoothed);
+            let x = match &first {
+                Some(fit) if j < centre => fit.value(j as f64 - centre as f64),
+                _ => smoothed,
+            };
+            self.emit(j, t, x);
         }
-        self.last = Some(smoothed);
+        self.last = Some((centre, smoothed));
     }
 
-    /// After the last sample: the last half window takes the last smoothed value (a log
-    /// shorter than a window, the mean of its positions).
+    /// After the last sample: the last half window takes the last window's fit at its own
+    /// times ([`sg::WindowFit`]; a log shorter than a window, the mean of its positions).
     pub fn finish(&mut self) {
-        let x = self.last.unwrap_or_else(|| {
-            self.positions.values().iter().sum::<f64>() / self.positions.len().max(1) as f64
+        let fit = self.last.and_then(|(centre, _)| {
+            Some((
+                centre,
+                sg::WindowFit::new(self.positions.values(), self.stride)?,
+            ))
         });
+        let held = self.last.map_or_else(
+            || self.positions.values().iter().sum::<f64>() / self.positions.len().max(1) as f64,
+            |(_, x)| x,
+        );
         while let Some((j, t)) = self.waiting.pop_front() {
+            let x = fit.map_or(held, |(centre, fit)| fit.value(j as f64 - centre as f64));
             self.emit(j, t, x);
         }
         while let Some((j, t, motion)) = self.rest.pop_front() {
