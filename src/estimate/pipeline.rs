@@ -1285,13 +1285,19 @@ where
     // The inertia's floor keeps the prediction stable: RK4 needs D dt / M and
     // sqrt(sigma / M) dt of order 1 or less, and an inertia below that cannot be resolved at
     // this sampling rate anyway. A held inertia (not resolved by identification) starts there.
-    // The stiffness is greatest at the logged end where k2 x is: sigma = k2 mu exp(k2 x).
-    // (Taken at the largest |x| instead, a log reaching 74 mm below its zero, as a light rod
-    // driven by force may, gave a stiffness of 8e5 N/mm there, and an inertia floor of 0.79
-    // N s^2/mm on a rod of 0.45: the filter diverged and its restarts wandered.)
+    // The stiffness is greatest at the end of the span where k2 x is: sigma = k2 mu exp(k2 x).
+    // The span is the logged positions for a law identified from them, the designed stroke
+    // for a designed law. (Taken at the largest |x| instead, a log reaching 74 mm below its
+    // zero, as a light rod driven by force may, gave a stiffness of 8e5 N/mm there, and an
+    // inertia floor of 0.79 N s^2/mm on a rod of 0.45: the filter diverged and its restarts
+    // wandered.)
+    let span = match &opts.init {
+        EstimateInit::Identify => (lo - offset_mm, hi - offset_mm),
+        EstimateInit::Law { xmax_mm, .. } => (0.0, *xmax_mm),
+    };
     let stiffest = {
         let k2 = init.k2_per_mm.0;
-        (k2 * (lo - offset_mm)).max(k2 * (hi - offset_mm))
+        (k2 * span.0).max(k2 * span.1)
     };
     let sigma_top = init.k2_per_mm.0.abs() * init.mu_n.abs() * stiffest.exp();
     let m_floor = (init.d1_n_s_per_mm.0.abs() * dt)
