@@ -392,7 +392,7 @@ impl WindowFit {
         let stride = stride.max(1);
         let n = values.len();
         let centre = n.checked_sub(1)? / 2;
-        if n % 2 == 0 || centre % stride != 0 {
+        if n.is_multiple_of(2) || !centre.is_multiple_of(stride) {
             return None;
         }
         let points = n.div_ceil(stride);
