@@ -338,20 +338,20 @@ pub struct LogReading {
 }
 
 impl LogReading {
-    /// What the reader found: the columns it read by their names, the units row, the gaps it
-    /// filled and the rows it left out (the first of `left_out_count`), and the intervals'
+    /// What the reader found: the lines it skipped, the columns it read by their names or in
+    /// a units row's units, the gaps it filled and the rows it left out, and the intervals'
     /// scatter.
-    #[allow(clippy::too_many_arguments)]
-    pub fn new(
-        preamble: Option<(u64, u64)>,
-        rows_at_hz: Option<f64>,
-        recognised: &[crate::estimate::log::RecognisedColumn],
-        units_row: Option<&(u64, [String; 3])>,
-        filled: &[crate::estimate::log::FilledGap],
-        left_out: &[u64],
-        left_out_count: usize,
-        interval_scatter: Option<f64>,
-    ) -> LogReading {
+    pub fn new(reading: crate::estimate::log::Reading<'_>) -> LogReading {
+        let crate::estimate::log::Reading {
+            preamble,
+            rows_at_hz,
+            recognised,
+            units_row,
+            filled,
+            left_out,
+            left_out_count,
+            interval_scatter,
+        } = reading;
         LogReading {
             notes: [
                 preamble.map(|(first, last)| {
@@ -394,16 +394,7 @@ impl LogReading {
 
     /// What reading a log held whole found.
     pub fn of_log(log: &crate::estimate::log::CalibrationLog) -> LogReading {
-        LogReading::new(
-            log.preamble,
-            log.rows_at_hz,
-            &log.recognised,
-            log.units_row.as_ref(),
-            &log.filled,
-            &log.left_out.0,
-            log.left_out.1,
-            log.interval_scatter,
-        )
+        LogReading::new(log.reading())
     }
 
     /// Prints the notes and warnings on stderr, each with the log's path.
@@ -919,16 +910,7 @@ pub fn survey_log_file(
         b.finish_and_clear();
     }
     let surveyed = surveyed.map_err(|e| log_error(log_path, e))?;
-    let reading = LogReading::new(
-        reader.preamble(),
-        reader.rows_at_hz(),
-        reader.recognised(),
-        reader.units_row(),
-        reader.filled(),
-        reader.left_out(),
-        reader.left_out_count(),
-        reader.interval_scatter(),
-    );
+    let reading = LogReading::new(reader.reading());
     reading.print(log_path);
     Ok((surveyed, reading))
 }

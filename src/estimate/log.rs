@@ -775,6 +775,30 @@ pub struct CalibrationLog {
     pub rows_at_hz: Option<f64>,
 }
 
+/// What reading a log found besides its samples, as the reader streaming it
+/// ([`LogReader::reading`]) and the log read whole ([`CalibrationLog::reading`]) both hold it:
+/// the lines skipped, the columns read by name or in a units row's units, the gaps filled, the
+/// rows left out and the intervals' scatter.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Reading<'a> {
+    /// The lines skipped before the header ([`LogReader::preamble`]).
+    pub preamble: Option<(u64, u64)>,
+    /// The rate the rows were read at, for a log without a time column.
+    pub rows_at_hz: Option<f64>,
+    /// The columns read by their names ([`LogReader::recognised`]).
+    pub recognised: &'a [RecognisedColumn],
+    /// The units row under the header ([`LogReader::units_row`]).
+    pub units_row: Option<&'a (u64, [String; 3])>,
+    /// Dropped samples filled by interpolation.
+    pub filled: &'a [FilledGap],
+    /// The lines of the first rows left out ([`LogReader::left_out`]).
+    pub left_out: &'a [u64],
+    /// How many rows were left out.
+    pub left_out_count: usize,
+    /// The sampling intervals' scatter ([`LogReader::interval_scatter`]).
+    pub interval_scatter: Option<f64>,
+}
+
 /// A column the reader took for a quantity by its name, the header lacking the column the map
 /// names for it by default (`t_s`, `force_n`, `position_mm`): the one column whose name reads
 /// as that quantity (`Time [ms]`, `Load (kN)`, `Extension (mm)`), in the unit its name carries
@@ -792,6 +816,20 @@ pub struct RecognisedColumn {
 }
 
 impl CalibrationLog {
+    /// What reading the log found besides its samples.
+    pub fn reading(&self) -> Reading<'_> {
+        Reading {
+            preamble: self.preamble,
+            rows_at_hz: self.rows_at_hz,
+            recognised: &self.recognised,
+            units_row: self.units_row.as_ref(),
+            filled: &self.filled,
+            left_out: &self.left_out.0,
+            left_out_count: self.left_out.1,
+            interval_scatter: self.interval_scatter,
+        }
+    }
+
     /// Moves the encoder zero: every position becomes x - `offset_mm`.
     pub fn shift_position(&mut self, offset_mm: f64) {
         for x in self.position_mm.iter_mut() {
@@ -1602,6 +1640,20 @@ impl<R: Read> LogReader<R> {
     /// How many rows with no value were left out ([`LogReader::left_out`] lists the first 100).
     pub fn left_out_count(&self) -> usize {
         self.left_out_count
+    }
+
+    /// What reading the log has found so far besides its samples.
+    pub fn reading(&self) -> Reading<'_> {
+        Reading {
+            preamble: self.preamble(),
+            rows_at_hz: self.rows_at_hz(),
+            recognised: self.recognised(),
+            units_row: self.units_row(),
+            filled: self.filled(),
+            left_out: self.left_out(),
+            left_out_count: self.left_out_count(),
+            interval_scatter: self.interval_scatter(),
+        }
     }
 }
 
