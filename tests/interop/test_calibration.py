@@ -629,6 +629,46 @@ def test_a_force_step_the_default_force_rate_smears_is_recovered_over_a_shorter_
         assert abs(f[key] - truth) < 3.0 * f[f"{key}_std"], (key, f[key], f[f"{key}_std"], truth)
 
 
+@pytest.mark.parametrize("i", [1073, 1095])
+def test_the_filter_holds_on_a_log_that_starts_slow_or_reaches_below_zero(tmp_path, i):
+    """Sweep draws 1095 (sines at 500 Hz, m 0.28, d0 2.77 N, the rod at 0.5 to 1 mm/s, read
+    through a 2.2 s window) and 1073 (force-controlled at 1 kHz, m 0.45, d1 0.05, the rod driven
+    to 74 mm below its zero), analog. On 1095 the log's first 1.1 s took the first window's
+    smoothed motion held, the friction's sign came out wrong there, and its step at 1.1 s sent
+    M from 0.28 to 0.66 and k2 17.5 % low, flagged. On 1073 the filter's stiffness ceiling was
+    taken 74 mm up the exponential, its inertia floor (0.79) above the rod's inertia: it
+    diverged, and its restarts wandered (k2 -8.4 %, flagged). Both are now consistent (exit 0),
+    with k2 and M within three of their standard deviations and k2 within 1 %."""
+    tr, log = sweep_log(tmp_path, i)
+    est = camspring("estimate", log, "--json", "-o", tmp_path / "est.csv")
+    assert est.returncode == 0, est.stderr[-3000:]
+    j = json.loads(est.stdout)
+    assert j["consistency"]["consistent"], j["consistency"]
+    assert j["recovery"] is None, j["recovery"]
+    f = j["final"]
+    assert abs(f["k2_per_mm"] / tr.k2 - 1.0) < 0.01, (f["k2_per_mm"], tr.k2)
+    for key, truth in [("k2_per_mm", tr.k2), ("m_n_s2_per_mm", tr.m)]:
+        assert abs(f[key] - truth) < 3.0 * f[f"{key}_std"], (key, f[key], f[f"{key}_std"], truth)
+
+
+def test_a_filter_whose_innovations_are_too_large_takes_the_short_force_rate(tmp_path):
+    """Sweep draw 1016 (trapezoids at 100 Hz, m 0.42, d1 0.26, d0 1.36 N), analog: each
+    acceleration step is a force step of m times it, which the default force rate spreads over
+    0.41 s. The filter ran through with its innovations 1.69 times their predicted variance,
+    flagged. It now runs again with the force rate over 0.13 s, whose innovations are inside
+    their band: consistent (exit 0), the recovery says so, and k2 and M are within three of
+    their standard deviations."""
+    tr, log = sweep_log(tmp_path, 1016)
+    est = camspring("estimate", log, "--json", "-o", tmp_path / "est.csv")
+    assert est.returncode == 0, est.stderr[-3000:]
+    j = json.loads(est.stdout)
+    assert "the force rate over 0.130 s" in j["recovery"], j["recovery"]
+    assert 0.7 <= j["consistency"]["nis_mean"] <= 1.5, j["consistency"]
+    f = j["final"]
+    for key, truth in [("k2_per_mm", tr.k2), ("m_n_s2_per_mm", tr.m)]:
+        assert abs(f[key] - truth) < 3.0 * f[f"{key}_std"], (key, f[key], f[f"{key}_std"], truth)
+
+
 @pytest.mark.parametrize("i", [29, 39, 64, 79])
 def test_an_inertia_identification_gives_up_with_a_servos_transients_is_carried_free(tmp_path, i):
     """Sweep draws 29 (m 0.203, d0 3.29 N, 500 Hz), 39 (m 0.243, d0 1.92 N, 100 Hz), 64 (m
