@@ -1481,12 +1481,11 @@ where
             // over 0.4 s, which drives the predicted motion a fraction of the true
             // acceleration and loses a fine encoder's motion by many standard deviations.
             let short = opts.force_rate.shorter(dt).map(|rate| {
-                let how = format!(
-                    "the force rate over {:.3} s instead of {:.3} s (a force step, the inertia \
-                     times a velocity step or friction's at a reversal, is then not spread over \
-                     the whole window)",
-                    rate.window_taken_s(dt).unwrap_or(0.0),
-                    opts.force_rate.window_taken_s(dt).unwrap_or(0.0),
+                let how = short_rate_how(
+                    rate,
+                    opts.force_rate,
+                    dt,
+                    "a velocity step or friction's at a reversal",
                 );
                 (rate, settings_for(rate), start, how)
             });
@@ -1566,12 +1565,11 @@ where
     let (run, settings, stiffness_path) = match opts.force_rate.shorter(dt) {
         Some(rate) if recovery.is_none() && run.nis_mean > NIS_RANGE.1 => {
             let first_nis = run.nis_mean;
-            let how = format!(
-                "the force rate over {:.3} s instead of {:.3} s (a force step, the inertia times \
-                 an acceleration step or friction's at a start, is then not spread over the \
-                 whole window)",
-                rate.window_taken_s(dt).unwrap_or(0.0),
-                opts.force_rate.window_taken_s(dt).unwrap_or(0.0),
+            let how = short_rate_how(
+                rate,
+                opts.force_rate,
+                dt,
+                "an acceleration step or friction's at a start",
             );
             sink.restart();
             match run_once(rate, settings_for(rate), start, sink) {
@@ -1676,6 +1674,18 @@ where
         unresolved_friction_sign,
         filter_k2,
     })
+}
+
+/// How a run with the short force rate `rate` differs from one with `default` at step `dt`,
+/// for a recovery note: `steps` names the force steps it no longer spreads (the inertia times
+/// them).
+fn short_rate_how(rate: ekf::ForceRate, default: ekf::ForceRate, dt: f64, steps: &str) -> String {
+    format!(
+        "the force rate over {:.3} s instead of {:.3} s (a force step, the inertia times \
+         {steps}, is then not spread over the whole window)",
+        rate.window_taken_s(dt).unwrap_or(0.0),
+        default.window_taken_s(dt).unwrap_or(0.0),
+    )
 }
 
 /// What the twins of a log are made from: the log's filter run, its init and settings.
