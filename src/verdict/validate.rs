@@ -139,6 +139,11 @@ pub fn not_shown_notes(criteria: &[Criterion]) -> Vec<String> {
                      design, so the filter, not the spring, is off there (its model misses a force \
                      the log carries); k2 and the force curve judge the law"
                 }
+                "force_band" if !upper.is_finite() => {
+                    "the log's force curve meets no part of the designed stroke's band (a log \
+                     wholly off the stroke: check the encoder's zero, or fit it with \
+                     --position-offset auto), or has no quasi-static bin there"
+                }
                 _ => "more passes over the stroke, or a longer log, narrow the bins' standard errors",
             };
             if upper.is_finite() {
@@ -194,10 +199,12 @@ pub fn band_criterion(
 ) -> (Criterion, Vec<BandExit>) {
     let mut exits: Vec<BandExit> = Vec::new();
     let mut worst_rel = 0.0_f64;
+    let mut compared = 0_usize;
     for (j, &x) in band.x_mm.iter().enumerate() {
         if x < lo || x > hi {
             continue;
         }
+        compared += 1;
         let lower = band.unloading_lo_n[j];
         let upper = band.loading_hi_n[j].unwrap_or(band.unloading_hi_n[j]);
         let f = force(x);
@@ -228,7 +235,9 @@ pub fn band_criterion(
         deviation_percent: 100.0 * worst_rel,
         tolerance_percent: 0.0,
         pass: exits.is_empty(),
-        deviation_upper_percent: None,
+        // A curve that meets none of the band's stations (a log wholly off the designed
+        // stroke) is not resolved: not judged, rather than passed at 0 %.
+        deviation_upper_percent: (compared == 0).then_some(f64::INFINITY),
     };
     (criterion, exits)
 }
@@ -734,6 +743,13 @@ pub struct Coverage {
 impl Coverage {
     /// One sentence: the deflections and designed forces covered (for the text and the page).
     pub fn summary(&self) -> String {
+        if self.stroke_fraction <= 0.0 {
+            return format!(
+                "none of the {:.2} mm stroke: the log's positions lie wholly {} it",
+                self.xmax_mm,
+                if self.from_mm > 0.0 { "above" } else { "below" }
+            );
+        }
         format!(
             "x = {:.2} ... {:.2} mm, {:.0} % of the {:.2} mm stroke; designed force {:.1} ... {:.1} N of Fmax {:.1} N",
             self.from_mm,
@@ -794,7 +810,14 @@ pub fn coverage(
     }
     let uncovered = 100.0 * (1.0 - fraction);
     let short = fraction < MIN_STROKE_COVERED;
-    if short {
+    if fraction <= 0.0 {
+        warnings.push(format!(
+            "the log covers none of the {xmax_mm:.2} mm stroke, less than the {:.0} % a verdict \
+             needs: the force curve is not judged and a pass is not conclusive; record a run over \
+             the stroke, or take the encoder's zero out (--position-offset auto)",
+            100.0 * MIN_STROKE_COVERED
+        ));
+    } else if short {
         warnings.push(format!(
             "the log covers x = {from:.2} ... {to:.2} mm, {:.0} % of the {xmax_mm:.2} mm stroke, \
              less than the {:.0} % a verdict needs: the rest of the stroke is not judged and a \
@@ -1078,6 +1101,7 @@ pub fn stroke_criteria(
             // A bin is outside the band only beyond its standard error times the bins'
             // multiple-comparison factor, as for force_max: a failure is one the log shows.
             let z = bin_sigmas(d.bins.len());
+            let mut compared = 0_usize;
             for bin in &d.bins {
                 // The band's stations bracketing the bin, linearly.
                 let j = b
@@ -1102,6 +1126,7 @@ pub fn stroke_criteria(
                     (Some(h0), Some(h1)) => lerp(h0, h1),
                     _ => continue,
                 };
+                compared += 1;
                 let f = bin.measured_n;
                 let allowance = z * bin.measured_std_n;
                 let (side, beyond, edge) = if f > hi + allowance {
@@ -1133,8 +1158,11 @@ pub fn stroke_criteria(
                     tolerance_percent: 0.0,
                     // A log that moves one way only does not resolve the force curve
                     // ([`Diagnosis::moves_one_way`]): not judged.
-                    pass: d.moves_one_way() || (!d.bins.is_empty() && exits.is_empty()),
-                    deviation_upper_percent: d.moves_one_way().then_some(f64::INFINITY),
+                    // Nor does one with no bin on the band's stroke (a log wholly off the
+                    // designed stroke): not judged, rather than passed at 0 %.
+                    pass: d.moves_one_way() || compared == 0 || exits.is_empty(),
+                    deviation_upper_percent: (d.moves_one_way() || compared == 0)
+                        .then_some(f64::INFINITY),
                 }],
                 exits,
             )
@@ -1360,6 +1388,66 @@ mod tests {
         let (c, cov) = coverage(&law, -1.0, 5.0, 15.0);
         assert!(!c.shown() && cov.from_mm == 0.0);
         assert_eq!(cov.warnings.len(), 2, "{:?}", cov.warnings);
+    }
+
+    #[test]
+    fn a_log_wholly_off_the_stroke_covers_none_of_it_and_its_force_is_not_judged() {
+        // F = exp(0.2 x) + 1 over 0 ... 15 mm, logged at 22 ... 37 mm (an encoder 20 mm off).
+        let law = ExpLaw {
+            mu_n: 1.0,
+            k2_per_mm: 0.2,
+            f0_n: 1.0,
+        };
+        let (c, cov) = coverage(&ForceLaw::Exponential(law), 22.0, 37.0, 15.0);
+        assert!(c.pass && !c.shown() && cov.stroke_fraction == 0.0, "{c:?}");
+        assert_eq!(
+            cov.summary(),
+            "none of the 15.00 mm stroke: the log's positions lie wholly above it"
+        );
+        assert!(
+            cov.warnings
+                .iter()
+                .any(|w| w.contains("covers none of the 15.00 mm stroke")),
+            "{:?}",
+            cov.warnings
+        );
+        // The band of builds, 10 % either side of the law at 0 ... 15 mm: a force curve far
+        // outside it (ten times the law) meets none of its stations there, so the force is
+        // not resolved, rather than passed at 0 %.
+        let x_mm: Vec<f64> = (0..=15).map(f64::from).collect();
+        let band = ForceBand {
+            samples: 1000,
+            seed: 0,
+            quantiles: [0.025, 0.975],
+            loading_lo_n: x_mm.iter().map(|&x| Some(0.9 * law.force_n(x))).collect(),
+            loading_hi_n: x_mm.iter().map(|&x| Some(1.1 * law.force_n(x))).collect(),
+            unloading_lo_n: x_mm.iter().map(|&x| 0.9 * law.force_n(x)).collect(),
+            unloading_hi_n: x_mm.iter().map(|&x| 1.1 * law.force_n(x)).collect(),
+            x_mm,
+            sensitivity: Vec::new(),
+        };
+        let (c, exits) = band_criterion(|x| 10.0 * law.force_n(x), &band, 22.0, 37.0);
+        assert!(c.pass && exits.is_empty() && !c.shown(), "{c:?}");
+        assert_eq!(c.deviation_upper_percent, Some(f64::INFINITY));
+        assert!(not_shown_notes(std::slice::from_ref(&c))[0].contains("--position-offset auto"));
+        // The same curve over the stroke fails: the criterion can.
+        let (c, exits) = band_criterion(|x| 10.0 * law.force_n(x), &band, 0.0, 15.0);
+        assert!(
+            !c.pass && exits.len() == 1 && exits[0].side == "above",
+            "{c:?}"
+        );
+        // With k2 judged beside it, the verdict is a pass that is not conclusive, not a
+        // clean pass.
+        let k2 = Criterion {
+            name: "k2",
+            what: "",
+            deviation_percent: 0.1,
+            tolerance_percent: 3.0,
+            pass: true,
+            deviation_upper_percent: Some(0.5),
+        };
+        let (c, _) = band_criterion(|x| law.force_n(x), &band, 22.0, 37.0);
+        assert_eq!(settle(&[k2, c], true), (true, false, true));
     }
 
     #[test]
@@ -1707,5 +1795,28 @@ mod tests {
         assert_eq!(exits.len(), 1, "{exits:?}");
         assert!(exits[0].side == "above" && exits[0].from_mm == 4.0 && exits[0].to_mm == 4.0);
         assert!((exits[0].worst_n - 3.0).abs() < 1e-9, "{exits:?}");
+        // Bins wholly beyond the band's stations, or none: the force is not resolved (not
+        // judged), rather than passed or failed at 0 %.
+        for beyond in [
+            bins(0.0)
+                .into_iter()
+                .map(|mut b| {
+                    b.x_mm += 20.0;
+                    b
+                })
+                .collect(),
+            Vec::new(),
+        ] {
+            let (c, exits) = stroke_criteria(
+                &diagnosis(beyond),
+                &law,
+                FrictionCorrection::Loading,
+                0.03,
+                Some(&band),
+            );
+            assert!(c[0].pass && exits.is_empty(), "{c:?}");
+            assert_eq!(c[0].deviation_upper_percent, Some(f64::INFINITY));
+            assert!(!judged(&c));
+        }
     }
 }
