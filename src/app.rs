@@ -1222,9 +1222,17 @@ pub fn run_validate(
             if judge_strokes(&mut v.criteria, &mut v.band_exits) {
                 v.pass = v.criteria.iter().all(|c| c.pass);
             }
-            let cov;
+            let mut cov;
             ((v.pass, v.conclusive, v.judged), cov) =
                 judge_coverage(&mut v.criteria, v.pass, v.range_min_mm, v.range_max_mm);
+            // A position logged in another unit than it is read in shows as a k2 that unit's
+            // length times the design's.
+            cov.warnings
+                .extend(crate::verdict::validate::position_unit_hint(
+                    law.k2_per_mm,
+                    judged_k2,
+                    judged_k2_std,
+                ));
             v.coverage = Some(cov);
             v.diagnosis = diagnosis.clone();
             // The measured force-deflection points come from the quasi-static curve.

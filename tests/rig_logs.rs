@@ -952,6 +952,11 @@ fn a_load_cell_or_an_encoder_read_reversed_is_named_and_read_with_a_negative_uni
     // 30 mm travel.
     std::fs::write(d.join("pull.csv"), mapped(&text, |f, x| (-f, x))).unwrap();
     std::fs::write(d.join("down.csv"), mapped(&text, |f, x| (f, 30.0 - x))).unwrap();
+    // An encoder counting down from the spring's zero: every position negative. Its fit
+    // found no spring at all (mu and k2 "not identifiable"), its inertia and damping swollen
+    // until their noise covered the spring's force (a residual of 83 N RMS at a reduced
+    // chi-square of 1.02), and it was reported as a fit, exit 0.
+    std::fs::write(d.join("negative.csv"), mapped(&text, |f, x| (f, -x))).unwrap();
     let identify = |log: &str, extra: &[&str]| {
         let mut args = vec!["identify", log, "--json"];
         args.extend_from_slice(extra);
@@ -969,6 +974,7 @@ fn a_load_cell_or_an_encoder_read_reversed_is_named_and_read_with_a_negative_uni
     for (log, likely, option) in [
         ("pull.csv", "load-cell", "--force NAME:-N"),
         ("down.csv", "encoder", "--position NAME:-mm"),
+        ("negative.csv", "encoder", "--position NAME:-mm"),
     ] {
         let (code, v) = identify(log, &[]);
         assert_eq!(code, Some(1), "{log}");
@@ -1000,6 +1006,9 @@ fn a_load_cell_or_an_encoder_read_reversed_is_named_and_read_with_a_negative_uni
     // The negative unit reads them as the rig meant: the load cell's log identifies exactly as
     // the original, the encoder's with the same curvature (its zero is elsewhere).
     let (code, v) = identify("pull.csv", &["--force", "force_n:-N"]);
+    assert_eq!(code, Some(0));
+    assert_eq!(v["parameters"], truth["parameters"]);
+    let (code, v) = identify("negative.csv", &["--position", "position_mm:-mm"]);
     assert_eq!(code, Some(0));
     assert_eq!(v["parameters"], truth["parameters"]);
     let (code, v) = identify("down.csv", &["--position", "position_mm:-mm"]);
@@ -1036,6 +1045,35 @@ fn a_load_cell_or_an_encoder_read_reversed_is_named_and_read_with_a_negative_uni
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let offset = v["position_offset_mm"].as_f64().unwrap();
     assert!((offset + 30.0).abs() < 0.05, "{offset}");
+    // A position logged in metres and read as mm fails, with the unit named (k2 a thousand
+    // times the design's), and passes read in metres.
+    std::fs::write(d.join("metres.csv"), mapped(&text, |f, x| (f, x / 1000.0))).unwrap();
+    let out = camspring(d, &["validate", &paper, "metres.csv", "--json"]);
+    assert_eq!(out.status.code(), Some(1));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(
+        v["coverage"]["warnings"]
+            .to_string()
+            .contains("logged in m and read as mm: read it in m with --position NAME:m"),
+        "{}",
+        v["coverage"]["warnings"]
+    );
+    let out = camspring(
+        d,
+        &[
+            "validate",
+            &paper,
+            "metres.csv",
+            "--position",
+            "position_mm:m",
+        ],
+    );
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
     // Time cannot be reversed.
     let out = camspring(d, &["identify", "calib.csv", "--time", "t_s:-s"]);
     assert_eq!(out.status.code(), Some(2));

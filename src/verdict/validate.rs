@@ -763,6 +763,40 @@ impl Coverage {
     }
 }
 
+/// The units a position column is most often logged in by mistake, with their length in mm:
+/// read as mm, a log in one of them has its identified k2 this many times the built one's.
+const POSITION_UNIT_SLIPS: [(&str, f64); 4] =
+    [("m", 1000.0), ("in", 25.4), ("cm", 10.0), ("um", 1e-3)];
+
+/// How close (relative) the ratio of identified to designed k2 must come to a unit's length
+/// in mm for [`position_unit_hint`] to name it: a build off its design by 10 % is far off,
+/// and the nearest two lengths (10 and 25.4) are 2.5 times apart.
+const UNIT_SLIP_MATCH: f64 = 0.1;
+
+/// Where the identified exponent rate is a unit's length in mm times the designed one (within
+/// [`UNIT_SLIP_MATCH`], k2 resolved to better than that), the warning that the position column
+/// was likely logged in that unit and read as mm, with the option that reads it right. A log
+/// in metres read as mm spans a thousandth of the stroke, and its k2 comes out a thousand
+/// times the design's: the verdict then fails on a curve the spring did follow.
+pub fn position_unit_hint(designed_k2: f64, identified_k2: f64, k2_std: f64) -> Option<String> {
+    if !(designed_k2 > 0.0 && identified_k2 > 0.0 && k2_std.is_finite())
+        || k2_std > UNIT_SLIP_MATCH * identified_k2
+    {
+        return None;
+    }
+    let ratio = identified_k2 / designed_k2;
+    POSITION_UNIT_SLIPS
+        .iter()
+        .find(|(_, mm)| (ratio / mm - 1.0).abs() <= UNIT_SLIP_MATCH)
+        .map(|(unit, _)| {
+            format!(
+                "the identified k2 ({identified_k2:.6} /mm) is {ratio:.4} times the design's \
+                 ({designed_k2:.6} /mm), as if the position was logged in {unit} and read as mm: \
+                 read it in {unit} with --position NAME:{unit}"
+            )
+        })
+}
+
 /// The coverage of a log spanning `lo ..= hi` (mm) of a law designed over `0 ..= xmax_mm`, and
 /// its criterion (`coverage`, the uncovered share against its tolerance). A log that covers
 /// less than [`MIN_STROKE_COVERED`] of the stroke gives no evidence about the rest, so it
@@ -1388,6 +1422,30 @@ mod tests {
         let (c, cov) = coverage(&law, -1.0, 5.0, 15.0);
         assert!(!c.shown() && cov.from_mm == 0.0);
         assert_eq!(cov.warnings.len(), 2, "{:?}", cov.warnings);
+    }
+
+    #[test]
+    fn a_k2_a_units_length_times_the_designs_names_that_unit() {
+        // A log in metres read as mm: k2 1000 times the design's (the simulated default
+        // sines log: 264.0245 +- 0.2274 against 0.264038).
+        let hint = position_unit_hint(0.264038, 264.024539, 0.227408).unwrap();
+        assert!(
+            hint.contains("--position NAME:m") && hint.contains("999.9"),
+            "{hint}"
+        );
+        // In inches: 25.4 times; in um: a thousandth.
+        assert!(position_unit_hint(0.2, 0.2 * 25.4 * 1.03, 0.01)
+            .unwrap()
+            .contains("NAME:in"));
+        assert!(position_unit_hint(0.2, 0.2e-3, 1e-6)
+            .unwrap()
+            .contains("NAME:um"));
+        // A build 30 % stiff, or 20 % off a unit's length, or a k2 the log does not resolve
+        // to 10 %, names none.
+        assert_eq!(position_unit_hint(0.2, 0.26, 0.001), None);
+        assert_eq!(position_unit_hint(0.2, 0.2 * 1000.0 * 1.2, 0.1), None);
+        assert_eq!(position_unit_hint(0.2, 200.0, 30.0), None);
+        assert_eq!(position_unit_hint(0.2, 200.0, f64::NAN), None);
     }
 
     #[test]
