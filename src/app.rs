@@ -351,6 +351,7 @@ impl LogReading {
             left_out,
             left_out_count,
             interval_scatter,
+            mean_interval_s,
         } = reading;
         LogReading {
             notes: [
@@ -382,6 +383,7 @@ impl LogReading {
             warnings: [
                 filled_warning(filled, left_out, left_out_count),
                 interval_scatter_warning(interval_scatter),
+                slow_sampling_warning(mean_interval_s, rows_at_hz.is_some()),
             ]
             .into_iter()
             .flatten()
@@ -406,6 +408,24 @@ impl LogReading {
             eprintln!("warning: {}: {w}", path.display());
         }
     }
+}
+
+/// The slowest sampling a calibration rig's log is taken to have (s): a log sampled this
+/// slowly or slower is more likely one whose time column is in ms read as seconds (a 100 Hz
+/// log so read is sampled every 10 s).
+pub const SLOWEST_LIKELY_INTERVAL_S: f64 = 1.0;
+
+/// The warning for a log whose time column gives a mean interval of
+/// [`SLOWEST_LIKELY_INTERVAL_S`] or more: a time in ms read as s leaves no motion for the
+/// dynamic fit, and identification's error then speaks of a Savitzky-Golay window of minutes.
+/// None for rows read at a given rate (`rows_at_hz`).
+fn slow_sampling_warning(mean_interval_s: Option<f64>, rows_at_hz: bool) -> Option<String> {
+    let dt = mean_interval_s.filter(|&dt| !rows_at_hz && dt >= SLOWEST_LIKELY_INTERVAL_S)?;
+    Some(format!(
+        "the log is sampled every {dt} s ({} Hz), more slowly than a calibration rig samples; \
+         if its time column is in ms, read it in ms with --time NAME:ms",
+        1.0 / dt
+    ))
 }
 
 /// The progress bar of reading a log file of `size` bytes (None off a terminal).
@@ -1232,6 +1252,14 @@ pub fn run_validate(
                     law.k2_per_mm,
                     judged_k2,
                     judged_k2_std,
+                ));
+            // And a force logged in another unit, as the designed force divided by its size.
+            cov.warnings
+                .extend(crate::verdict::validate::force_unit_hint(
+                    law,
+                    &v.identified,
+                    v.range_min_mm,
+                    v.range_max_mm,
                 ));
             v.coverage = Some(cov);
             v.diagnosis = diagnosis.clone();

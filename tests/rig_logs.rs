@@ -943,7 +943,7 @@ fn mapped(text: &str, map: impl Fn(f64, f64) -> (f64, f64)) -> String {
 }
 
 #[test]
-fn a_load_cell_or_an_encoder_read_reversed_is_named_and_read_with_a_negative_unit() {
+fn a_sensor_read_reversed_or_in_another_unit_is_named_and_read_as_meant() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     simulate_paper(d, "6");
@@ -1074,6 +1074,45 @@ fn a_load_cell_or_an_encoder_read_reversed_is_named_and_read_with_a_negative_uni
         "{}",
         String::from_utf8_lossy(&out.stdout)
     );
+    // A force logged in kN and read as N likewise.
+    std::fs::write(d.join("kn.csv"), mapped(&text, |f, x| (f / 1000.0, x))).unwrap();
+    let out = camspring(d, &["validate", &paper, "kn.csv", "--json"]);
+    assert_eq!(out.status.code(), Some(1));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(
+        v["coverage"]["warnings"]
+            .to_string()
+            .contains("logged in kN and read as N: read it in kN with --force NAME:kN"),
+        "{}",
+        v["coverage"]["warnings"]
+    );
+    let out = camspring(d, &["validate", &paper, "kn.csv", "--force", "force_n:kN"]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    // A time logged in ms and read as s: sampled every 10 s, which the reader warns of.
+    let ms: String = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| match (i, l.split_once(',')) {
+            (0, _) | (_, None) => format!("{l}\n"),
+            (_, Some((t, rest))) => format!("{},{rest}\n", t.parse::<f64>().unwrap() * 1000.0),
+        })
+        .collect();
+    std::fs::write(d.join("ms.csv"), ms).unwrap();
+    let warned = |args: &[&str]| {
+        let out = camspring(d, args);
+        String::from_utf8_lossy(&out.stderr).contains(
+            "the log is sampled every 10 s (0.1 Hz), more slowly than a calibration rig \
+             samples; if its time column is in ms, read it in ms with --time NAME:ms",
+        )
+    };
+    assert!(warned(&["identify", "ms.csv"]));
+    assert!(!warned(&["identify", "ms.csv", "--time", "t_s:ms"]));
+    assert!(!warned(&["identify", "calib.csv"]));
     // Time cannot be reversed.
     let out = camspring(d, &["identify", "calib.csv", "--time", "t_s:-s"]);
     assert_eq!(out.status.code(), Some(2));

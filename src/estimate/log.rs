@@ -797,6 +797,8 @@ pub struct Reading<'a> {
     pub left_out_count: usize,
     /// The sampling intervals' scatter ([`LogReader::interval_scatter`]).
     pub interval_scatter: Option<f64>,
+    /// The mean sampling interval (s), once there are two samples.
+    pub mean_interval_s: Option<f64>,
 }
 
 /// A column the reader took for a quantity by its name, the header lacking the column the map
@@ -827,6 +829,7 @@ impl CalibrationLog {
             left_out: &self.left_out.0,
             left_out_count: self.left_out.1,
             interval_scatter: self.interval_scatter,
+            mean_interval_s: Some(self.dt_s()).filter(|dt| dt.is_finite()),
         }
     }
 
@@ -1653,6 +1656,10 @@ impl<R: Read> LogReader<R> {
             left_out: self.left_out(),
             left_out_count: self.left_out_count(),
             interval_scatter: self.interval_scatter(),
+            mean_interval_s: {
+                let (sum, _, n) = self.interval_sums;
+                (n > 0).then(|| sum / n as f64)
+            },
         }
     }
 }

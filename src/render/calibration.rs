@@ -848,10 +848,15 @@ pub fn format_validation(v: &Validation) -> String {
     s.push_str(&criteria_lines(&v.criteria));
     let _ = writeln!(
         s,
-        "  identified F = {:.6} N * exp({:.6} /mm * x) + {:.6} N; {} k2 = {:.6} +- {:.6} /mm",
+        "  identified F = {:.6} N * exp({:.6} /mm * x) + {}; {} k2 = {:.6} +- {:.6} /mm",
         v.identified.mu_n,
         v.identified.k2_per_mm,
-        v.identified.f0_n,
+        if v.identified.f0_n.is_finite() {
+            format!("{:.6} N", v.identified.f0_n)
+        } else {
+            // Identification left F0 out (not identifiable from this log).
+            "F0 (not identified)".to_string()
+        },
         if v.ekf_consistent {
             "EKF"
         } else {

@@ -204,10 +204,14 @@ pub fn band_criterion(
         if x < lo || x > hi {
             continue;
         }
+        let f = force(x);
+        if !f.is_finite() {
+            // A curve with a parameter left out (not identifiable) has no force to compare.
+            continue;
+        }
         compared += 1;
         let lower = band.unloading_lo_n[j];
         let upper = band.loading_hi_n[j].unwrap_or(band.unloading_hi_n[j]);
-        let f = force(x);
         let (side, beyond, edge) = if f > upper {
             ("above", f - upper, upper)
         } else if f < lower {
@@ -793,6 +797,47 @@ pub fn position_unit_hint(designed_k2: f64, identified_k2: f64, k2_std: f64) -> 
                 "the identified k2 ({identified_k2:.6} /mm) is {ratio:.4} times the design's \
                  ({designed_k2:.6} /mm), as if the position was logged in {unit} and read as mm: \
                  read it in {unit} with --position NAME:{unit}"
+            )
+        })
+}
+
+/// The force units a load cell is most often logged in by mistake, with their size in N: read
+/// as N, a log in one of them has its identified force this many times smaller than the built
+/// spring's.
+const FORCE_UNIT_SLIPS: [(&str, f64); 4] = [
+    ("kN", 1000.0),
+    ("kgf", 9.806_65),
+    ("lbf", 4.448_221_615_260_5),
+    ("mN", 1e-3),
+];
+
+/// Where the identified force curve is the designed one divided by a unit's size in N, within
+/// [`UNIT_SLIP_MATCH`] at every one of nine deflections over `lo ..= hi` (mm), and k2 within it
+/// of the design's, the warning that the force column was likely logged in that unit and read
+/// as N, with the option that reads it right.
+pub fn force_unit_hint(designed: &ExpLaw, identified: &ExpLaw, lo: f64, hi: f64) -> Option<String> {
+    if !(lo.is_finite() && hi.is_finite() && hi > lo)
+        || (identified.k2_per_mm / designed.k2_per_mm - 1.0).abs() > UNIT_SLIP_MATCH
+    {
+        return None;
+    }
+    let ratios: Vec<f64> = (0..9)
+        .map(|i| lo + (hi - lo) * f64::from(i) / 8.0)
+        .map(|x| identified.force_n(x) / designed.force_n(x))
+        .collect();
+    FORCE_UNIT_SLIPS
+        .iter()
+        .find(|(_, n)| {
+            ratios
+                .iter()
+                .all(|r| r.is_finite() && (r * n - 1.0).abs() <= UNIT_SLIP_MATCH)
+        })
+        .map(|(unit, _)| {
+            format!(
+                "the identified force is 1/{:.4} of the design's over the logged range, as if \
+                 the force was logged in {unit} and read as N: read it in {unit} with --force \
+                 NAME:{unit}",
+                1.0 / (ratios.iter().sum::<f64>() / ratios.len() as f64)
             )
         })
 }
@@ -1449,6 +1494,52 @@ mod tests {
     }
 
     #[test]
+    fn a_force_a_units_size_times_smaller_than_the_designs_names_that_unit() {
+        let designed = ExpLaw {
+            mu_n: 1.0,
+            k2_per_mm: 0.26,
+            f0_n: 1.2,
+        };
+        let scaled = |by: f64| ExpLaw {
+            mu_n: designed.mu_n / by,
+            k2_per_mm: designed.k2_per_mm,
+            f0_n: designed.f0_n / by,
+        };
+        let hint = force_unit_hint(&designed, &scaled(1000.0), 2.7, 17.2).unwrap();
+        assert!(
+            hint.contains("1/1000.0000") && hint.contains("--force NAME:kN"),
+            "{hint}"
+        );
+        assert!(force_unit_hint(&designed, &scaled(4.448), 2.7, 17.2)
+            .unwrap()
+            .contains("NAME:lbf"));
+        assert!(force_unit_hint(&designed, &scaled(9.81), 2.7, 17.2)
+            .unwrap()
+            .contains("NAME:kgf"));
+        assert!(force_unit_hint(&designed, &scaled(1e-3), 2.7, 17.2)
+            .unwrap()
+            .contains("NAME:mN"));
+        // The law itself, a spring 30 % stiff, a force curve of another shape (F0 left out,
+        // or k2 off), and an empty range name none.
+        assert_eq!(force_unit_hint(&designed, &designed, 2.7, 17.2), None);
+        assert_eq!(
+            force_unit_hint(&designed, &scaled(1.0 / 1.3), 2.7, 17.2),
+            None
+        );
+        let no_f0 = ExpLaw {
+            f0_n: f64::NAN,
+            ..scaled(1000.0)
+        };
+        assert_eq!(force_unit_hint(&designed, &no_f0, 2.7, 17.2), None);
+        let steeper = ExpLaw {
+            k2_per_mm: 0.4,
+            ..scaled(1000.0)
+        };
+        assert_eq!(force_unit_hint(&designed, &steeper, 2.7, 17.2), None);
+        assert_eq!(force_unit_hint(&designed, &scaled(1000.0), 5.0, 5.0), None);
+    }
+
+    #[test]
     fn a_log_wholly_off_the_stroke_covers_none_of_it_and_its_force_is_not_judged() {
         // F = exp(0.2 x) + 1 over 0 ... 15 mm, logged at 22 ... 37 mm (an encoder 20 mm off).
         let law = ExpLaw {
@@ -1488,6 +1579,9 @@ mod tests {
         assert!(c.pass && exits.is_empty() && !c.shown(), "{c:?}");
         assert_eq!(c.deviation_upper_percent, Some(f64::INFINITY));
         assert!(not_shown_notes(std::slice::from_ref(&c))[0].contains("--position-offset auto"));
+        // A curve with F0 left out (NaN) compares nothing either.
+        let (c, _) = band_criterion(|_| f64::NAN, &band, 0.0, 15.0);
+        assert!(c.pass && !c.shown(), "{c:?}");
         // The same curve over the stroke fails: the criterion can.
         let (c, exits) = band_criterion(|x| 10.0 * law.force_n(x), &band, 0.0, 15.0);
         assert!(
