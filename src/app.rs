@@ -352,6 +352,7 @@ impl LogReading {
             left_out_count,
             interval_scatter,
             mean_interval_s,
+            force_clips,
         } = reading;
         LogReading {
             notes: [
@@ -387,6 +388,7 @@ impl LogReading {
             ]
             .into_iter()
             .flatten()
+            .chain(force_clips.iter().flatten().map(force_clip_warning))
             .collect(),
             filled_samples: filled.iter().map(|g| g.samples).sum(),
             rows_left_out: left_out_count,
@@ -408,6 +410,26 @@ impl LogReading {
             eprintln!("warning: {}: {w}", path.display());
         }
     }
+}
+
+/// The warning for a force that sticks at its largest or smallest value while the rod moves
+/// ([`crate::estimate::log::ClipWatch`]).
+fn force_clip_warning(c: &crate::estimate::log::ForceClip) -> String {
+    let (which, cause) = if c.high {
+        (
+            "largest",
+            "a load cell, its amplifier or its converter at the top of its range",
+        )
+    } else {
+        ("smallest", "a load cell or its amplifier that reads no lower (one that reads one way only, or the bottom of its range)")
+    };
+    format!(
+        "the force stands at its {which} value, {} N, on {} samples while the position moves \
+         over x = {:.3} ... {:.3} mm: {cause}; the spring's force is not measured there, and \
+         what the fit and the verdict say of that part of the stroke is not from this log; \
+         record it with a load cell whose range covers the spring's force",
+        c.force_n, c.samples, c.from_mm, c.to_mm
+    )
 }
 
 /// The slowest sampling a calibration rig's log is taken to have (s): a log sampled this

@@ -1120,6 +1120,45 @@ fn a_sensor_read_reversed_or_in_another_unit_is_named_and_read_as_meant() {
 }
 
 #[test]
+fn a_load_cell_at_the_top_of_its_range_is_named_with_where_it_stood() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    simulate_paper(d, "5");
+    let text = std::fs::read_to_string(d.join("calib.csv")).unwrap();
+    // The paper spec's spring reaches 60 N at x = 15.4 mm; the log goes to about 17 mm.
+    std::fs::write(
+        d.join("clipped.csv"),
+        mapped(&text, |f, x| (f.min(60.0), x)),
+    )
+    .unwrap();
+    let out = camspring(d, &["identify", "clipped.csv", "--json"]);
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let warnings = v["log_reading"]["warnings"].to_string();
+    assert!(
+        warnings.contains("the force stands at its largest value, 60 N, on")
+            && warnings
+                .contains("a load cell, its amplifier or its converter at the top of its range"),
+        "{warnings}"
+    );
+    // Where the rod stood at 60 N: from about the law's 15.4 mm on (a little before it on
+    // the loading stroke, whose damping and inertia add a few newtons).
+    let from: f64 = warnings
+        .split("moves over x = ")
+        .nth(1)
+        .and_then(|r| r.split(' ').next())
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!((from - 15.4).abs() < 0.5, "{from}");
+    // The log as written says nothing of it.
+    let out = camspring(d, &["identify", "calib.csv", "--json"]);
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(!v["log_reading"]["warnings"]
+        .to_string()
+        .contains("stands at"));
+}
+
+#[test]
 fn an_encoder_zero_off_by_half_a_millimetre_is_found_and_taken_out() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();

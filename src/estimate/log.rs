@@ -775,6 +775,161 @@ pub struct CalibrationLog {
     pub rows_at_hz: Option<f64>,
 }
 
+/// A force channel flat at its largest (or smallest) value while the rod moves: a load cell or
+/// its amplifier at the end of its range ([`ClipWatch`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct ForceClip {
+    /// The value the force sticks at (N).
+    pub force_n: f64,
+    /// At the log's largest force (true) or its smallest.
+    pub high: bool,
+    /// Samples at that value.
+    pub samples: usize,
+    /// The positions those samples span (mm).
+    pub from_mm: f64,
+    /// Their end (mm).
+    pub to_mm: f64,
+}
+
+/// The fewest samples at a force extreme that [`ClipWatch`] calls a clip (and at least
+/// [`CLIP_MIN_SHARE`] of the log).
+pub const CLIP_MIN_SAMPLES: usize = 10;
+
+/// The least share of a log's samples at a force extreme that [`ClipWatch`] calls a clip.
+pub const CLIP_MIN_SHARE: f64 = 0.005;
+
+/// The least share of the log's position range that the samples at a force extreme must span
+/// for [`ClipWatch`] to call it a clip: a rod that moves on while the force stands still. A
+/// coarse load cell's top reading repeats too, at a hold or a turn, but there the rod stands
+/// within the position noise, and a spring's force moves by a quantum within a fraction of a
+/// millimetre.
+pub const CLIP_MIN_SPAN_SHARE: f64 = 0.1;
+
+/// One extreme of the force seen so far, as `value` = the force times `sign` (+1 for the
+/// largest, -1 for the smallest): how many samples hold it exactly, the positions they span,
+/// and the next value short of it with its count since it became the next.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Extreme {
+    sign: f64,
+    value: f64,
+    samples: usize,
+    from_mm: f64,
+    to_mm: f64,
+    next_value: f64,
+    next_samples: usize,
+}
+
+impl Extreme {
+    fn new(sign: f64) -> Extreme {
+        Extreme {
+            sign,
+            value: f64::NAN,
+            samples: 0,
+            from_mm: f64::NAN,
+            to_mm: f64::NAN,
+            next_value: f64::NAN,
+            next_samples: 0,
+        }
+    }
+
+    /// Takes a sample: a new extreme starts over (the old one becomes the next), the same
+    /// value is counted, and a value between the two becomes the next.
+    fn push(&mut self, force_n: f64, position_mm: f64) {
+        let v = self.sign * force_n;
+        if self.samples == 0 || v > self.value {
+            if self.samples > 0 {
+                (self.next_value, self.next_samples) = (self.value, self.samples);
+            }
+            (self.value, self.samples) = (v, 1);
+            (self.from_mm, self.to_mm) = (position_mm, position_mm);
+        } else if v == self.value {
+            self.samples += 1;
+            self.from_mm = self.from_mm.min(position_mm);
+            self.to_mm = self.to_mm.max(position_mm);
+        } else if v == self.next_value {
+            self.next_samples += 1;
+        } else if self.next_samples == 0 || v > self.next_value {
+            (self.next_value, self.next_samples) = (v, 1);
+        }
+    }
+}
+
+/// How many times the samples at the value next to an extreme the extreme's must be for
+/// [`ClipWatch`] to call it a clip. A force read in coarse steps holds each of its values on
+/// many samples, at the soft end of the stroke over millimetres, and its extreme about as
+/// often as the step next to it; a load cell at the end of its range holds its last value
+/// while the force it would read goes on rising, and the value next to it is one of the many
+/// a finely resolved force passes once or twice.
+pub const CLIP_NEXT_RATIO: usize = 10;
+
+/// Watches a log's force for a value it sticks at while the position moves: the largest force
+/// read exactly on many samples spread over the stroke, far more often than the value next to
+/// it, is a load cell (or its amplifier, or its converter) at the end of its range, which the
+/// fit then takes out as transients or bends the law to. Constant memory, one pass.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClipWatch {
+    high: Extreme,
+    low: Extreme,
+    samples: usize,
+    position_mm: (f64, f64),
+}
+
+impl Default for ClipWatch {
+    fn default() -> ClipWatch {
+        ClipWatch {
+            high: Extreme::new(1.0),
+            low: Extreme::new(-1.0),
+            samples: 0,
+            position_mm: (f64::INFINITY, f64::NEG_INFINITY),
+        }
+    }
+}
+
+impl ClipWatch {
+    /// Takes one sample.
+    pub fn push(&mut self, force_n: f64, position_mm: f64) {
+        self.samples += 1;
+        self.position_mm = (
+            self.position_mm.0.min(position_mm),
+            self.position_mm.1.max(position_mm),
+        );
+        self.high.push(force_n, position_mm);
+        self.low.push(force_n, position_mm);
+    }
+
+    /// The clips found: the largest force, then the smallest, where at least
+    /// [`CLIP_MIN_SAMPLES`] and [`CLIP_MIN_SHARE`] of the samples hold it, over at least
+    /// [`CLIP_MIN_SPAN_SHARE`] of the position range, [`CLIP_NEXT_RATIO`] times as many as
+    /// hold the value next to it.
+    pub fn clips(&self) -> [Option<ForceClip>; 2] {
+        let range = self.position_mm.1 - self.position_mm.0;
+        let needed = CLIP_MIN_SAMPLES.max((CLIP_MIN_SHARE * self.samples as f64).ceil() as usize);
+        let clip = |e: &Extreme| {
+            (e.samples >= needed
+                && e.samples >= CLIP_NEXT_RATIO * e.next_samples
+                && range > 0.0
+                && e.to_mm - e.from_mm >= CLIP_MIN_SPAN_SHARE * range)
+                .then_some(ForceClip {
+                    force_n: e.sign * e.value,
+                    high: e.sign > 0.0,
+                    samples: e.samples,
+                    from_mm: e.from_mm,
+                    to_mm: e.to_mm,
+                })
+        };
+        [clip(&self.high), clip(&self.low)]
+    }
+
+    /// The watch over every sample of `log`.
+    pub fn of(log: &CalibrationLog) -> ClipWatch {
+        let mut w = ClipWatch::default();
+        for (&f, &x) in log.force_n.iter().zip(&log.position_mm) {
+            w.push(f, x);
+        }
+        w
+    }
+}
+
 /// What reading a log found besides its samples, as the reader streaming it
 /// ([`LogReader::reading`]) and the log read whole ([`CalibrationLog::reading`]) both hold it:
 /// the lines skipped, the columns read by name or in a units row's units, the gaps filled, the
@@ -799,6 +954,8 @@ pub struct Reading<'a> {
     pub interval_scatter: Option<f64>,
     /// The mean sampling interval (s), once there are two samples.
     pub mean_interval_s: Option<f64>,
+    /// Where the force sticks at its largest or smallest value while the rod moves.
+    pub force_clips: [Option<ForceClip>; 2],
 }
 
 /// A column the reader took for a quantity by its name, the header lacking the column the map
@@ -830,6 +987,7 @@ impl CalibrationLog {
             left_out_count: self.left_out.1,
             interval_scatter: self.interval_scatter,
             mean_interval_s: Some(self.dt_s()).filter(|dt| dt.is_finite()),
+            force_clips: ClipWatch::of(self).clips(),
         }
     }
 
@@ -1053,6 +1211,8 @@ pub struct LogReader<R: Read> {
     unit_pending: Option<LogError>,
     /// The single sampling intervals (no gap in them): their sum, sum of squares and count.
     interval_sums: (f64, f64, u64),
+    /// The force's extremes, for a load cell at the end of its range.
+    clip_watch: ClipWatch,
     /// The lines skipped before the header ([`LogReader::preamble`]).
     preamble: Option<(u64, u64)>,
     /// Rows at a given rate, with no time column ([`ColumnMap::rows_at_hz`]), and the data
@@ -1294,6 +1454,7 @@ impl<R: Read> LogReader<R> {
             recognised,
             unit_pending,
             interval_sums: (0.0, 0.0, 0),
+            clip_watch: ClipWatch::default(),
             preamble,
             rows_at_hz: map.rows_at_hz,
             rows: 0,
@@ -1660,6 +1821,7 @@ impl<R: Read> LogReader<R> {
                 let (sum, _, n) = self.interval_sums;
                 (n > 0).then(|| sum / n as f64)
             },
+            force_clips: self.clip_watch.clips(),
         }
     }
 }
@@ -1707,6 +1869,7 @@ impl<R: Read> Iterator for LogReader<R> {
         }
         let s = self.queued.pop_front()?;
         self.samples += 1;
+        self.clip_watch.push(s.force_n, s.position_mm);
         Some(Ok(s))
     }
 }
@@ -1777,6 +1940,55 @@ pub fn write_log(log: &CalibrationLog) -> Vec<u8> {
 #[cfg(test)]
 mod tests {
     use super::{power_of_ten, written_resolution};
+
+    #[test]
+    fn a_force_that_stands_at_its_end_while_the_rod_moves_is_a_clip_and_coarse_steps_are_not() {
+        use super::{ClipWatch, ForceClip};
+        // A spring F = exp(0.2 x) + 1 (2 to 21 N) swept sinusoidally over 0 ... 15 mm, 10 000
+        // samples, with a deterministic noise of about 0.1 N written to 1e-6 N.
+        let sweep = |read: &dyn Fn(f64) -> f64| {
+            let mut w = ClipWatch::default();
+            for i in 0..10_000 {
+                let x = 7.5 - 7.5 * (i as f64 * 0.005).cos();
+                let noise = 0.1 * ((i as f64 * 12.9898).sin() * 43_758.545).fract();
+                let f = (0.2 * x).exp() + 1.0 + noise;
+                w.push(read((f * 1e6).round() / 1e6), x);
+            }
+            w.clips()
+        };
+        assert_eq!(sweep(&|f| f), [None, None]);
+        // A load cell that reads no more than 12 N: the force stands there from x = 12.0 mm
+        // (e^2.4 + 1 = 12.0) to the end of the sweep.
+        let [high, low] = sweep(&|f| f.min(12.0));
+        let ForceClip {
+            force_n,
+            high: true,
+            samples,
+            from_mm,
+            to_mm,
+        } = high.unwrap()
+        else {
+            panic!("{high:?}")
+        };
+        assert_eq!(force_n, 12.0);
+        assert!(
+            samples > 1000 && (from_mm - 12.0).abs() < 0.1 && to_mm > 14.99,
+            "{high:?}"
+        );
+        assert_eq!(low, None);
+        // One that reads no less than 3 N (e^(0.2 x) + 1 = 3 at x = 3.47 mm): the smallest.
+        let [high, low] = sweep(&|f| f.max(3.0));
+        assert!(
+            high.is_none() && low.is_some_and(|c| !c.high && c.force_n == 3.0 && c.from_mm < 0.01)
+        );
+        // Read in steps of 2 N, the smallest step (2 N) holds 0 ... 2.7 mm of the stroke, as
+        // the one next to it holds the next 2 mm: not a clip. In steps of 0.5 N and clipped
+        // at 12 N, the clip holds ten times the samples of the step below it: one.
+        let stepped = |f: f64, q: f64| (f / q).round() * q;
+        assert_eq!(sweep(&|f| stepped(f, 2.0)), [None, None]);
+        assert_eq!(sweep(&|f| stepped(f, 0.5)), [None, None]);
+        assert!(sweep(&|f| stepped(f, 0.5).min(12.0))[0].is_some());
+    }
 
     #[test]
     fn intervals_in_messages_read_to_five_significant_digits() {
