@@ -444,8 +444,8 @@ pub const SLOWEST_LIKELY_INTERVAL_S: f64 = 1.0;
 fn slow_sampling_warning(mean_interval_s: Option<f64>, rows_at_hz: bool) -> Option<String> {
     let dt = mean_interval_s.filter(|&dt| !rows_at_hz && dt >= SLOWEST_LIKELY_INTERVAL_S)?;
     Some(format!(
-        "the log is sampled every {dt} s ({} Hz), more slowly than a calibration rig samples; \
-         if its time column is in ms, read it in ms with --time NAME:ms",
+        "the log is sampled every {dt:.4} s ({:.4} Hz), more slowly than a calibration rig \
+         samples; if its time column is in ms, read it in ms with --time NAME:ms",
         1.0 / dt
     ))
 }

@@ -1106,8 +1106,8 @@ fn a_sensor_read_reversed_or_in_another_unit_is_named_and_read_as_meant() {
     let warned = |args: &[&str]| {
         let out = camspring(d, args);
         String::from_utf8_lossy(&out.stderr).contains(
-            "the log is sampled every 10 s (0.1 Hz), more slowly than a calibration rig \
-             samples; if its time column is in ms, read it in ms with --time NAME:ms",
+            "the log is sampled every 10.0000 s (0.1000 Hz), more slowly than a calibration \
+             rig samples; if its time column is in ms, read it in ms with --time NAME:ms",
         )
     };
     assert!(warned(&["identify", "ms.csv"]));

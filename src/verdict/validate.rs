@@ -769,13 +769,13 @@ impl Coverage {
 
 /// The units a position column is most often logged in by mistake, with their length in mm:
 /// read as mm, a log in one of them has its identified k2 this many times the built one's.
-const POSITION_UNIT_SLIPS: [(&str, f64); 4] =
+pub const POSITION_UNIT_SLIPS: [(&str, f64); 4] =
     [("m", 1000.0), ("in", 25.4), ("cm", 10.0), ("um", 1e-3)];
 
 /// How close (relative) the ratio of identified to designed k2 must come to a unit's length
 /// in mm for [`position_unit_hint`] to name it: a build off its design by 10 % is far off,
 /// and the nearest two lengths (10 and 25.4) are 2.5 times apart.
-const UNIT_SLIP_MATCH: f64 = 0.1;
+pub const UNIT_SLIP_MATCH: f64 = 0.1;
 
 /// Where the identified exponent rate is a unit's length in mm times the designed one (within
 /// [`UNIT_SLIP_MATCH`], k2 resolved to better than that), the warning that the position column
@@ -804,7 +804,7 @@ pub fn position_unit_hint(designed_k2: f64, identified_k2: f64, k2_std: f64) -> 
 /// The force units a load cell is most often logged in by mistake, with their size in N: read
 /// as N, a log in one of them has its identified force this many times smaller than the built
 /// spring's.
-const FORCE_UNIT_SLIPS: [(&str, f64); 4] = [
+pub const FORCE_UNIT_SLIPS: [(&str, f64); 4] = [
     ("kN", 1000.0),
     ("kgf", 9.806_65),
     ("lbf", 4.448_221_615_260_5),
