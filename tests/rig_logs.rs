@@ -1046,52 +1046,35 @@ fn a_sensor_read_reversed_or_in_another_unit_is_named_and_read_as_meant() {
     let offset = v["position_offset_mm"].as_f64().unwrap();
     assert!((offset + 30.0).abs() < 0.05, "{offset}");
     // A position logged in metres and read as mm fails, with the unit named (k2 a thousand
-    // times the design's), and passes read in metres.
-    std::fs::write(d.join("metres.csv"), mapped(&text, |f, x| (f, x / 1000.0))).unwrap();
-    let out = camspring(d, &["validate", &paper, "metres.csv", "--json"]);
-    assert_eq!(out.status.code(), Some(1));
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    assert!(
-        v["coverage"]["warnings"]
-            .to_string()
-            .contains("logged in m and read as mm: read it in m with --position NAME:m"),
-        "{}",
-        v["coverage"]["warnings"]
+    // times the design's), and passes read in metres; a force logged in kN and read as N
+    // likewise.
+    let unit_slip =
+        |log: &str, map: &dyn Fn(f64, f64) -> (f64, f64), named: &str, read: [&str; 2]| {
+            std::fs::write(d.join(log), mapped(&text, map)).unwrap();
+            let out = camspring(d, &["validate", &paper, log, "--json"]);
+            assert_eq!(out.status.code(), Some(1), "{log}");
+            let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+            let warnings = v["coverage"]["warnings"].to_string();
+            assert!(warnings.contains(named), "{log}: {warnings}");
+            let out = camspring(d, &["validate", &paper, log, read[0], read[1]]);
+            assert_eq!(
+                out.status.code(),
+                Some(0),
+                "{log}: {}",
+                String::from_utf8_lossy(&out.stdout)
+            );
+        };
+    unit_slip(
+        "metres.csv",
+        &|f, x| (f, x / 1000.0),
+        "logged in m and read as mm: read it in m with --position NAME:m",
+        ["--position", "position_mm:m"],
     );
-    let out = camspring(
-        d,
-        &[
-            "validate",
-            &paper,
-            "metres.csv",
-            "--position",
-            "position_mm:m",
-        ],
-    );
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stdout)
-    );
-    // A force logged in kN and read as N likewise.
-    std::fs::write(d.join("kn.csv"), mapped(&text, |f, x| (f / 1000.0, x))).unwrap();
-    let out = camspring(d, &["validate", &paper, "kn.csv", "--json"]);
-    assert_eq!(out.status.code(), Some(1));
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    assert!(
-        v["coverage"]["warnings"]
-            .to_string()
-            .contains("logged in kN and read as N: read it in kN with --force NAME:kN"),
-        "{}",
-        v["coverage"]["warnings"]
-    );
-    let out = camspring(d, &["validate", &paper, "kn.csv", "--force", "force_n:kN"]);
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stdout)
+    unit_slip(
+        "kn.csv",
+        &|f, x| (f / 1000.0, x),
+        "logged in kN and read as N: read it in kN with --force NAME:kN",
+        ["--force", "force_n:kN"],
     );
     // A time logged in ms and read as s: sampled every 10 s, which the reader warns of.
     let ms: String = text
