@@ -1172,7 +1172,18 @@ pub fn run_validate(
                           all_pass: bool,
                           lo: f64,
                           hi: f64| {
-        let (c, cov) = crate::verdict::validate::coverage(&designed, lo, hi, spec.law.xmax_mm());
+        let (c, mut cov) =
+            crate::verdict::validate::coverage(&designed, lo, hi, spec.law.xmax_mm());
+        // The strokes' force is the diagnosis's bins, the dynamics it fitted taken out: where
+        // its forward model does not explain the log, the verdict says so.
+        if let Some(d) = diagnosis.as_ref().filter(|d| d.fit.problem().is_some()) {
+            cov.warnings.push(format!(
+                "the design's forward model does not fit this log ({}): the force curve is \
+                 judged with the inertia and damping a misfit took out; `camspring diagnose` \
+                 says why",
+                d.fit.measures()
+            ));
+        }
         let all_pass = all_pass && c.pass;
         criteria.push(c);
         (crate::verdict::validate::settle(criteria, all_pass), cov)
@@ -1874,24 +1885,37 @@ pub fn run_revise(
     })?;
     let (design, diagnosis, log_reading) = diagnose_log(&spec, log_path, opts)?;
     let unresolved = unresolved_parts(&diagnosis);
-    let revision = if unresolved.is_empty() {
-        revise(&design, &diagnosis, tolerance)
+    // A revision rests on a diagnosis whose forward model explains the log and resolves the
+    // build's parts; otherwise it would be a guess, and it says why instead.
+    let refusal = if diagnosis.fit.problem().is_some() {
+        Some(format!(
+            "the design's forward model does not fit this log ({}; the diagnosis says why); a \
+             revision from its fitted build would be a guess. Check the spec is the built \
+             part's, and log the part again",
+            diagnosis.fit.measures()
+        ))
+    } else if !unresolved.is_empty() {
+        Some(format!(
+            "this log does not resolve {} (see the diagnosis); a revision would be a guess. \
+             Log a run that loads and unloads over most of the stroke, or give the rig's zero \
+             with --position-offset",
+            unresolved.join(", ")
+        ))
     } else {
-        Revision {
+        None
+    };
+    let revision = match refusal {
+        None => revise(&design, &diagnosis, tolerance),
+        Some(refusal) => Revision {
             revision: crate::verdict::revise::next_revision(spec.revision.as_deref()),
             error_as_built_max_percent: f64::NAN,
             error_as_built_rms_percent: f64::NAN,
             tolerance_percent: 100.0 * tolerance,
             options: Vec::new(),
             chosen: None,
-            refusal: Some(format!(
-                "this log does not resolve {} (see the diagnosis); a revision would be a guess. \
-                 Log a run that loads and unloads over most of the stroke, or give the rig's zero \
-                 with --position-offset",
-                unresolved.join(", ")
-            )),
+            refusal: Some(refusal),
             note: String::new(),
-        }
+        },
     };
     let mut files: Vec<(String, Vec<u8>)> = Vec::new();
     let mut owned: Vec<String> = vec![REVISION_JSON.to_string()];

@@ -762,6 +762,69 @@ fn help_has_examples_for_every_command() {
     }
 }
 
+/// A log of one design's part, diagnosed against another design: the forward model cannot
+/// explain it whatever the build, and the diagnosis says so (exit 1) instead of reporting
+/// findings, and `revise` builds nothing on it. Against its own design the same log fits.
+#[test]
+fn a_log_of_another_designs_part_does_not_fit_the_diagnosis_and_is_not_revised_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (knee, paper) = (spec_path("knee.toml"), spec_path("paper.toml"));
+    let out = camspring(d, &["simulate", knee.as_str(), "-o", "knee.csv"]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let diagnose = |spec: &str| {
+        let out = camspring(d, &["diagnose", spec, "knee.csv", "--json"]);
+        let g: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        (out.status.code(), g)
+    };
+    let (code, own) = diagnose(&knee);
+    assert_eq!(code, Some(0), "{own}");
+    assert_eq!(own["fit"]["status"], "fits", "{}", own["fit"]);
+    let (code, other) = diagnose(&paper);
+    assert_eq!(code, Some(1), "{other}");
+    assert_eq!(other["fit"]["status"], "does-not-fit", "{}", other["fit"]);
+    let reasons = other["fit"]["reasons"].to_string();
+    assert!(reasons.contains("another design's part"), "{reasons}");
+    let out = camspring(d, &["diagnose", paper.as_str(), "knee.csv"]);
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(
+        text.starts_with("diagnosis:") && text.contains("DOES NOT FIT THIS LOG"),
+        "{text}"
+    );
+    // validate, which judges the strokes by the diagnosis's bins, says so too.
+    let out = camspring(d, &["validate", paper.as_str(), "knee.csv"]);
+    assert_eq!(out.status.code(), Some(1));
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(
+        text.contains("warning: the design's forward model does not fit this log"),
+        "{text}"
+    );
+
+    let out = camspring(
+        d,
+        &["revise", paper.as_str(), "knee.csv", "-o", "rev", "--json"],
+    );
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let refusal = v["revision"]["refusal"].as_str().unwrap();
+    assert!(refusal.contains("does not fit this log"), "{refusal}");
+    assert!(
+        v["revision"]["chosen"].is_null() && v["spec"].is_null(),
+        "{v}"
+    );
+    assert!(!d.join("rev/paper-B.toml").exists());
+}
+
 #[test]
 fn simulate_a_build_off_its_design_then_diagnose_and_revise_it() {
     let dir = tempfile::tempdir().unwrap();

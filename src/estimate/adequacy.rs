@@ -57,13 +57,25 @@ pub enum FitStatus {
 }
 
 impl Adequacy {
-    /// Judges a fit by its reduced chi-square and whiteness test.
+    /// Judges a fit by its reduced chi-square and whiteness test: it fits from
+    /// [`MIN_REDUCED_CHI2`] to [`MAX_REDUCED_CHI2`], with white residuals.
     pub fn new(reduced_chi2: f64, whiteness: Option<Whiteness>) -> Adequacy {
+        Adequacy::within(reduced_chi2, whiteness, MIN_REDUCED_CHI2..=MAX_REDUCED_CHI2)
+    }
+
+    /// Judges a fit by its reduced chi-square, which must lie in `range`, and its whiteness
+    /// test.
+    pub fn within(
+        reduced_chi2: f64,
+        whiteness: Option<Whiteness>,
+        range: std::ops::RangeInclusive<f64>,
+    ) -> Adequacy {
+        let (low, high) = (*range.start(), *range.end());
         let mut reasons = Vec::new();
         let coloured = whiteness.is_some_and(|w| w.p_value < WHITENESS_LEVEL);
-        if reduced_chi2 > MAX_REDUCED_CHI2 || !reduced_chi2.is_finite() {
+        if reduced_chi2 > high || !reduced_chi2.is_finite() {
             reasons.push(format!(
-                "reduced chi-square {reduced_chi2:.2} is above {MAX_REDUCED_CHI2}: the residuals are larger than \
+                "reduced chi-square {reduced_chi2:.2} is above {high}: the residuals are larger than \
                  the noise model allows; {}",
                 if coloured {
                     "they are also correlated over time, so the likely cause is a force the model lacks \
@@ -76,9 +88,9 @@ impl Adequacy {
                      measure it with `camspring noise` on a log at rest and pass --noise"
                 }
             ));
-        } else if reduced_chi2 < MIN_REDUCED_CHI2 {
+        } else if reduced_chi2 < low {
             reasons.push(format!(
-                "reduced chi-square {reduced_chi2:.2} is below {MIN_REDUCED_CHI2}: the noise model is larger \
+                "reduced chi-square {reduced_chi2:.2} is below {low}: the noise model is larger \
                  than this log's noise, so the standard deviations are too wide; measure it with \
                  `camspring noise` on a log at rest and pass --noise"
             ));
@@ -102,6 +114,18 @@ impl Adequacy {
                 FitStatus::DoesNotFit
             },
             reasons,
+        }
+    }
+
+    /// The two measures in a few words: "reduced chi-square 2.61, residual whiteness p =
+    /// 4.2e-8".
+    pub fn measures(&self) -> String {
+        match &self.whiteness {
+            Some(w) => format!(
+                "reduced chi-square {:.2}, residual whiteness p = {:.1e}",
+                self.reduced_chi2, w.p_value
+            ),
+            None => format!("reduced chi-square {:.2}", self.reduced_chi2),
         }
     }
 

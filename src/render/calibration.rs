@@ -1321,6 +1321,13 @@ pub fn format_diagnosis(d: &crate::verdict::diagnose::Diagnosis) -> String {
         "diagnosis: the force misses the design's forward model by {:.2} % RMS; the fitted build leaves {:.2} % unexplained",
         d.force_error_before_percent, d.force_error_after_percent
     );
+    if let Some(problem) = d.fit.problem() {
+        let _ = writeln!(
+            s,
+            "THE DESIGN'S FORWARD MODEL DOES NOT FIT THIS LOG: {problem}. The findings below are \
+             the best fit of a model that does not explain the log; do not revise the design on them."
+        );
+    }
     if let Some(delay) = &d.force_delay {
         s.push_str(&force_delay_line(delay));
         if !delay.parameter_std.is_empty() {
@@ -1364,11 +1371,18 @@ pub fn format_diagnosis(d: &crate::verdict::diagnose::Diagnosis) -> String {
     );
     let _ = writeln!(
         s,
-        "fit: {} samples, window {:.2} s (by the window rule, of {} tried), reduced chi-square {:.2}",
+        "fit: {} samples, window {:.2} s (by the window rule, of {} tried), reduced chi-square {:.2}{}",
         d.samples,
         d.sg_window_s,
         d.windows_tried.len(),
-        d.reduced_chi2
+        d.reduced_chi2,
+        match &d.fit.whiteness {
+            Some(w) => format!(
+                ", residual whiteness {:.1} over {} lags (p = {:.2e})",
+                w.statistic, w.lags, w.p_value
+            ),
+            None => String::new(),
+        }
     );
     if d.outside_stroke_samples > 0 {
         let _ = writeln!(

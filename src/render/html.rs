@@ -635,6 +635,14 @@ pub fn diagnosis_section(d: &crate::verdict::diagnose::Diagnosis, svg: &str) -> 
          build parameters fitted, {:.2} % is left unexplained (reduced chi-square {:.2}).</p>\n<ul>\n",
         d.force_error_before_percent, d.force_error_after_percent, d.reduced_chi2
     );
+    if let Some(problem) = d.fit.problem() {
+        let _ = writeln!(
+            h,
+            "<li><b>The design's forward model does not fit this log:</b> {}. \
+             The findings below are the best fit of a model that does not explain the log.</li>",
+            escape(&problem)
+        );
+    }
     if d.findings.is_empty() {
         h.push_str("<li>No build parameter is off its design beyond its uncertainty.</li>\n");
     }

@@ -709,9 +709,15 @@ fn main() -> ExitCode {
                     format_diagnosis(&run.diagnosis),
                     run.svg_path.display()
                 );
-                Ok(Report::new(
+                let code = if run.diagnosis.fit.status == FitStatus::DoesNotFit {
+                    EXIT_CHECK_FAILED
+                } else {
+                    EXIT_OK
+                };
+                Ok(Report::of_checks(
                     text,
                     to_json(&with_log_reading(&run.diagnosis, &run.log_reading)?)?,
+                    code,
                 ))
             })(),
             json,
