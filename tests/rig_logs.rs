@@ -1139,6 +1139,29 @@ fn a_load_cell_at_the_top_of_its_range_is_named_with_where_it_stood() {
     assert!(!v["log_reading"]["warnings"]
         .to_string()
         .contains("stands at"));
+    // validate's coverage ends where the clip begins: the stroke beyond was travelled, not
+    // measured, and the designed force at its end is the load cell's 60 N, not the 97 N the
+    // rod reached. The log as written covers to its top.
+    let paper = spec_path("paper.toml");
+    let coverage = |log: &str| {
+        let out = camspring(d, &["validate", &paper, log, "--json"]);
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        v["coverage"].clone()
+    };
+    let clipped = coverage("clipped.csv");
+    let to = clipped["to_mm"].as_f64().unwrap();
+    assert!((to - from).abs() < 1e-3, "{clipped}");
+    let force_to = clipped["force_to_n"].as_f64().unwrap();
+    assert!((55.0..=61.0).contains(&force_to), "{clipped}");
+    assert!(
+        clipped["warnings"]
+            .to_string()
+            .contains("where the force is measured: from x = "),
+        "{clipped}"
+    );
+    let whole = coverage("calib.csv");
+    assert!(whole["to_mm"].as_f64().unwrap() > from + 1.0, "{whole}");
+    assert!(whole["force_to_n"].as_f64().unwrap() > 75.0, "{whole}");
 }
 
 #[test]
@@ -1271,6 +1294,99 @@ fn validate_says_what_part_of_the_stroke_the_log_covers() {
         "{}",
         String::from_utf8_lossy(&out.stdout)
     );
+}
+
+/// A rig that holds the rod at 2 and at 15 mm and steps between them spans 65 % of the
+/// stroke but measures the force at two deflections: validate's coverage counts where the rod
+/// dwelt, not the span, and a pass is not conclusive. The same span swept is counted whole.
+#[test]
+fn a_log_that_steps_between_holds_covers_the_holds_and_not_the_stroke_between() {
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let law = common::paper_law();
+    let mut rng = rand::rngs::StdRng::seed_from_u64(2);
+    let (force_noise, position_noise) = (
+        Normal::new(0.0, 0.1).unwrap(),
+        Normal::new(0.0, 0.005).unwrap(),
+    );
+    let smoothstep = |u: f64| {
+        let u = u.clamp(0.0, 1.0);
+        u * u * (3.0 - 2.0 * u)
+    };
+    // Every 20 s: 10 s at 2 mm, a 0.2 s step to 15 mm, 9.6 s there, a 0.2 s step back.
+    let holds = |t: f64| {
+        let phase = t % 20.0;
+        2.0 + 13.0 * (smoothstep((phase - 10.0) / 0.2) - smoothstep((phase - 19.8) / 0.2))
+    };
+    // The same span swept by a sine of 20 s.
+    let sweep = |t: f64| 8.5 - 6.5 * (std::f64::consts::TAU * t / 20.0).cos();
+    for (name, path) in [
+        ("holds.csv", &holds as &dyn Fn(f64) -> f64),
+        ("sweep.csv", &sweep),
+    ] {
+        let mut text = String::from("t_s,force_n,position_mm\n");
+        for i in 0..12_000 {
+            let t = f64::from(i) * 0.01;
+            let x = path(t);
+            text.push_str(&format!(
+                "{t:.2},{:.4},{:.5}\n",
+                law.force_n(x) + force_noise.sample(&mut rng),
+                x + position_noise.sample(&mut rng)
+            ));
+        }
+        std::fs::write(d.join(name), text).unwrap();
+    }
+    let paper = spec_path("paper.toml");
+    let validate = |log: &str| {
+        let out = camspring(d, &["validate", &paper, log, "--json"]);
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        (out.status.code(), v)
+    };
+    let (code, v) = validate("holds.csv");
+    let c = &v["coverage"];
+    // The span is 2 ... 15 mm of 20; the steps cross most of it at up to 97 mm/s, a sample
+    // every 1 mm, and only their slow ends dwell.
+    let (from, to) = (c["from_mm"].as_f64().unwrap(), c["to_mm"].as_f64().unwrap());
+    assert!((from - 2.0).abs() < 0.05 && (to - 15.0).abs() < 0.05, "{c}");
+    let crossed = c["crossed_mm"].as_f64().unwrap();
+    assert!((6.0..=12.6).contains(&crossed), "{c}");
+    let fraction = c["stroke_fraction"].as_f64().unwrap();
+    assert!(
+        (fraction - (to - from - crossed) / 20.0).abs() < 1e-9,
+        "{c}"
+    );
+    assert!(fraction < 0.35, "{c}");
+    assert!(
+        c["warnings"].to_string().contains("without dwelling"),
+        "{c}"
+    );
+    // The law is the log's own: nothing fails, and judged on the holds the pass is not
+    // conclusive. (Identification does not fit this log, reduced chi-square 2803, with k2
+    // 0.072 against 0.264, which failed the true law conclusively until k2 was no longer
+    // judged from a fit that does not explain the log.)
+    assert_eq!(code, Some(0), "{v}");
+    assert_eq!(v["conclusive"], false, "{v}");
+    let k2 = v["criteria"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c["name"] == "k2")
+        .unwrap();
+    assert_eq!(k2["pass"], true, "{k2}");
+    assert!(
+        k2["what"]
+            .as_str()
+            .unwrap()
+            .contains("does not fit this log"),
+        "{k2}"
+    );
+    // Swept, the span is covered whole.
+    let (_, v) = validate("sweep.csv");
+    let c = &v["coverage"];
+    assert_eq!(c["crossed_mm"].as_f64(), Some(0.0), "{c}");
+    assert!(c["stroke_fraction"].as_f64().unwrap() > 0.6, "{c}");
 }
 
 /// `estimate --twins N` reports the twins in the JSON: the bias taken out is the mean of their

@@ -732,6 +732,9 @@ pub struct Coverage {
     pub from_mm: f64,
     /// To (mm).
     pub to_mm: f64,
+    /// The length (mm) of `from_mm ... to_mm` the rod crossed without dwelling
+    /// ([`crossed_without_dwelling_mm`]): not counted in `stroke_fraction`.
+    pub crossed_mm: f64,
     /// The designed stroke (mm).
     pub xmax_mm: f64,
     /// The designed force over the covered deflections (N).
@@ -754,8 +757,13 @@ impl Coverage {
                 if self.from_mm > 0.0 { "above" } else { "below" }
             );
         }
+        let crossed = if self.crossed_mm > 0.0 {
+            format!(" less {:.2} mm crossed without dwelling", self.crossed_mm)
+        } else {
+            String::new()
+        };
         format!(
-            "x = {:.2} ... {:.2} mm, {:.0} % of the {:.2} mm stroke; designed force {:.1} ... {:.1} N of Fmax {:.1} N",
+            "x = {:.2} ... {:.2} mm{crossed}, {:.0} % of the {:.2} mm stroke; designed force {:.1} ... {:.1} N of Fmax {:.1} N",
             self.from_mm,
             self.to_mm,
             100.0 * self.stroke_fraction,
@@ -842,8 +850,9 @@ pub fn force_unit_hint(designed: &ExpLaw, identified: &ExpLaw, lo: f64, hi: f64)
         })
 }
 
-/// The coverage of a log spanning `lo ..= hi` (mm) of a law designed over `0 ..= xmax_mm`, and
-/// its criterion (`coverage`, the uncovered share against its tolerance). A log that covers
+/// The coverage of a log spanning `lo ..= hi` (mm) of a law designed over `0 ..= xmax_mm`, less
+/// `crossed_mm` of it that the rod crossed without dwelling ([`crossed_without_dwelling_mm`]),
+/// and its criterion (`coverage`, the uncovered share against its tolerance). A log that covers
 /// less than [`MIN_STROKE_COVERED`] of the stroke gives no evidence about the rest, so it
 /// cannot fail there, but cannot show a pass either: the criterion passes, not shown (its
 /// upper bound is the uncovered share), and the verdict, if every judged criterion passes, is
@@ -859,11 +868,13 @@ pub fn coverage(
     lo: f64,
     hi: f64,
     xmax_mm: f64,
+    crossed_mm: f64,
 ) -> (Criterion, Coverage) {
     let from = lo.clamp(0.0, xmax_mm);
     let to = hi.clamp(0.0, xmax_mm);
+    let crossed_mm = crossed_mm.clamp(0.0, (to - from).max(0.0));
     let fraction = if xmax_mm > 0.0 {
-        ((to - from) / xmax_mm).clamp(0.0, 1.0)
+        ((to - from - crossed_mm) / xmax_mm).clamp(0.0, 1.0)
     } else {
         0.0
     };
@@ -885,6 +896,15 @@ pub fn coverage(
              travel there (check the encoder's zero, sign and unit: --position-offset, \
              --position), and the force curve is judged on the stroke alone",
             100.0 * diagnose::STROKE_MARGIN
+        ));
+    }
+    if crossed_mm >= CROSSED_WARNING_SHARE * xmax_mm {
+        warnings.push(format!(
+            "the log crosses {crossed_mm:.2} mm of x = {from:.2} ... {to:.2} mm without dwelling \
+             there (fewer than {COVERAGE_MIN_SAMPLES} samples in each {:.3} mm of it: a step \
+             between holds, or a jump): the force is not measured there, and coverage counts the \
+             rest",
+            xmax_mm / COVERAGE_CELLS as f64
         ));
     }
     let uncovered = 100.0 * (1.0 - fraction);
@@ -920,6 +940,7 @@ pub fn coverage(
             stroke_fraction: fraction,
             from_mm: from,
             to_mm: to,
+            crossed_mm,
             xmax_mm,
             force_from_n: law.force_n(from),
             force_to_n: law.force_n(to),
@@ -927,6 +948,77 @@ pub fn coverage(
             warnings,
         },
     )
+}
+
+/// Cells the designed stroke is divided into to find where a log's rod crossed without
+/// dwelling ([`crossed_without_dwelling_mm`]).
+pub const COVERAGE_CELLS: usize = 100;
+
+/// Fewest logged positions in a cell of the stroke for the log to cover it: fewer, and the
+/// rod crossed it (a step between two holds, a jump) with no samples to measure its force by.
+pub const COVERAGE_MIN_SAMPLES: usize = 10;
+
+/// Share of the stroke crossed without dwelling from which the coverage warns.
+pub const CROSSED_WARNING_SHARE: f64 = 0.1;
+
+/// The length (mm) of the logged deflections `lo ... hi` (within the designed stroke
+/// `0 ... xmax_mm`) that the rod crossed without dwelling: the stroke's [`COVERAGE_CELLS`]
+/// cells wholly inside `lo ... hi` that hold fewer than [`COVERAGE_MIN_SAMPLES`] of the
+/// `positions` (mm). A log that moves over the stroke dwells in every cell; one that holds at
+/// two deflections and steps between them spans the stroke but measures two points of it
+/// (its steps are transients that identification and the diagnosis leave out). Cells at the
+/// ends, partly outside `lo ... hi`, are not counted: the span already ends there.
+pub fn crossed_without_dwelling_mm(positions: &[f64], lo: f64, hi: f64, xmax_mm: f64) -> f64 {
+    let spans = xmax_mm > 0.0 && hi > lo;
+    if !spans {
+        return 0.0;
+    }
+    let width = xmax_mm / COVERAGE_CELLS as f64;
+    let mut counts = vec![0usize; COVERAGE_CELLS];
+    for &x in positions {
+        if (lo..=hi).contains(&x) && (0.0..xmax_mm).contains(&x) {
+            counts[((x / width) as usize).min(COVERAGE_CELLS - 1)] += 1;
+        }
+    }
+    counts
+        .iter()
+        .enumerate()
+        .filter(|&(k, &c)| {
+            let (a, b) = (k as f64 * width, (k + 1) as f64 * width);
+            a >= lo && b <= hi && c < COVERAGE_MIN_SAMPLES
+        })
+        .count() as f64
+        * width
+}
+
+/// How near an end of the logged deflections (as a share of their range) a clipped force's
+/// positions must reach for [`measured_span`] to take that end off.
+pub const CLIP_EDGE_SHARE: f64 = 0.02;
+
+/// The logged deflections `lo ... hi` (mm) where the force was measured: a force clipped at
+/// the top or bottom of the load cell's range ([`crate::estimate::log::ForceClip`]) over
+/// positions that reach an end of the log's takes that end off, from the first clipped
+/// position on (a spring's force rises with deflection, so the clip holds the stroke's end).
+/// Coverage counts what is left: the stroke beyond a clip is not measured, though the rod
+/// travelled it. A clip inside the range (neither end) leaves it as it is. Returns the span
+/// and, where it was narrowed, the clip that narrowed it.
+pub fn measured_span(
+    lo: f64,
+    hi: f64,
+    clips: &[Option<crate::estimate::log::ForceClip>],
+) -> (f64, f64, Option<crate::estimate::log::ForceClip>) {
+    let edge = CLIP_EDGE_SHARE * (hi - lo).max(0.0);
+    let (mut from, mut to, mut by) = (lo, hi, None);
+    for c in clips.iter().flatten() {
+        if c.to_mm >= hi - edge && c.from_mm < to {
+            to = c.from_mm;
+            by = Some(*c);
+        } else if c.from_mm <= lo + edge && c.to_mm > from {
+            from = c.to_mm;
+            by = Some(*c);
+        }
+    }
+    (from, to.max(from), by)
 }
 
 /// The chance, over all of a log's bins, that a true law's binned curve leaves `force_max`'s
@@ -1438,6 +1530,40 @@ mod tests {
     }
 
     #[test]
+    fn a_log_that_steps_between_two_holds_covers_the_holds_not_the_stroke_between() {
+        // Holds at 2 and 15 mm (1000 samples each, +-0.01 mm), and a step between them of 5
+        // samples: on a 20 mm stroke in cells of 0.2 mm, the span 1.99 ... 15.01 mm holds
+        // cells 10 to 74 wholly (2.0 ... 15.0 mm), of which the holds fill the first and the
+        // last: 63 cells, 12.6 mm, crossed.
+        let mut x: Vec<f64> = (0..1000)
+            .map(|i| 2.0 + 0.01 * (f64::from(i) * 0.7).sin())
+            .collect();
+        x.extend((1..=5).map(|k| 2.0 + 13.0 * f64::from(k) / 6.0));
+        x.extend((0..1000).map(|i| 15.0 + 0.01 * (f64::from(i) * 0.7).cos()));
+        let (lo, hi) = (1.99, 15.01);
+        let crossed = crossed_without_dwelling_mm(&x, lo, hi, 20.0);
+        assert!((crossed - 12.6).abs() < 1e-9, "{crossed}");
+        let law = crate::model::ForceLaw::Exponential(ExpLaw {
+            mu_n: 1.0,
+            k2_per_mm: 0.2,
+            f0_n: 1.0,
+        });
+        let (c, cov) = coverage(&law, lo, hi, 20.0, crossed);
+        // (13.02 - 12.6) / 20 = 2.1 % of the stroke: far short, so not shown, and said.
+        assert!((cov.stroke_fraction - 0.021).abs() < 1e-9, "{cov:?}");
+        assert!(!c.shown());
+        assert!(cov.warnings.iter().any(|w| w.contains("crosses 12.60 mm")));
+        assert!(cov
+            .summary()
+            .contains("less 12.60 mm crossed without dwelling"));
+        // A sweep over the same span dwells everywhere: nothing is crossed.
+        let sweep: Vec<f64> = (0..20_000)
+            .map(|i| 8.5 + 6.51 * (f64::from(i) * 0.001).sin())
+            .collect();
+        assert_eq!(crossed_without_dwelling_mm(&sweep, lo, hi, 20.0), 0.0);
+    }
+
+    #[test]
     fn a_log_over_less_than_half_the_stroke_cannot_fail_there_or_show_a_pass() {
         // F = exp(0.2 x) + 1 over 0 ... 15 mm: Fmax = e^3 + 1 = 21.09 N.
         let law = crate::model::ForceLaw::Exponential(ExpLaw {
@@ -1445,12 +1571,12 @@ mod tests {
             k2_per_mm: 0.2,
             f0_n: 1.0,
         });
-        let (c, cov) = coverage(&law, 3.0, 12.0, 15.0);
+        let (c, cov) = coverage(&law, 3.0, 12.0, 15.0, 0.0);
         assert!(c.pass && c.shown() && cov.warnings.is_empty());
         assert!((cov.stroke_fraction - 0.6).abs() < 1e-12);
         assert!((c.deviation_percent - 40.0).abs() < 1e-9);
         // 7.8 ... 15 mm: 48 % covered, to Fmax.
-        let (c, cov) = coverage(&law, 7.8, 15.0, 15.0);
+        let (c, cov) = coverage(&law, 7.8, 15.0, 15.0, 0.0);
         assert!(c.pass && !c.shown(), "{c:?}");
         assert!((c.deviation_percent - 52.0).abs() < 1e-9);
         assert!(!conclusive(true, std::slice::from_ref(&c)));
@@ -1464,7 +1590,7 @@ mod tests {
         );
         // 0 ... 5 mm: the designed force there, e + 1 = 3.72 N, is below half of Fmax: a
         // second warning, for the stiff end.
-        let (c, cov) = coverage(&law, -1.0, 5.0, 15.0);
+        let (c, cov) = coverage(&law, -1.0, 5.0, 15.0, 0.0);
         assert!(!c.shown() && cov.from_mm == 0.0);
         assert_eq!(cov.warnings.len(), 2, "{:?}", cov.warnings);
     }
@@ -1547,7 +1673,7 @@ mod tests {
             k2_per_mm: 0.2,
             f0_n: 1.0,
         };
-        let (c, cov) = coverage(&ForceLaw::Exponential(law), 22.0, 37.0, 15.0);
+        let (c, cov) = coverage(&ForceLaw::Exponential(law), 22.0, 37.0, 15.0, 0.0);
         assert!(c.pass && !c.shown() && cov.stroke_fraction == 0.0, "{c:?}");
         assert_eq!(
             cov.summary(),
