@@ -1288,7 +1288,7 @@ pub fn run_validate(
                     c.pass = true;
                 }
                 c.what = if misfit {
-                    "exponent rate k2: identification's model does not fit this log (identify says why) and the EKF was not consistent on it, so k2 is not judged"
+                    crate::verdict::validate::K2_MISFIT_WHAT
                 } else if unresolved {
                     "exponent rate k2: not resolved by this log (its standard deviation exceeds half its value, or it is not positive, or identification's mu cannot be told from zero), so not judged"
                 } else if consistent {

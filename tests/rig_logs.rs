@@ -1382,6 +1382,12 @@ fn a_log_that_steps_between_holds_covers_the_holds_and_not_the_stroke_between() 
             .contains("does not fit this log"),
         "{k2}"
     );
+    let out = camspring(d, &["validate", &paper, "holds.csv"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("not conclusive: k2 is not judged: identification's model does not fit"),
+        "{text}"
+    );
     // Swept, the span is covered whole.
     let (_, v) = validate("sweep.csv");
     let c = &v["coverage"];

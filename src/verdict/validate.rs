@@ -115,6 +115,10 @@ pub fn criterion_word(c: &Criterion) -> &'static str {
     }
 }
 
+/// What the `k2` criterion says where it is not judged because identification's model does not
+/// fit the log and the EKF was not consistent on it.
+pub const K2_MISFIT_WHAT: &str = "exponent rate k2: identification's model does not fit this log (identify says why) and the EKF was not consistent on it, so k2 is not judged";
+
 /// For each passing criterion the log does not show, what it leaves open and what narrows it.
 pub fn not_shown_notes(criteria: &[Criterion]) -> Vec<String> {
     criteria
@@ -129,6 +133,13 @@ pub fn not_shown_notes(criteria: &[Criterion]) -> Vec<String> {
                      that misses the tolerance there could have passed",
                     c.deviation_percent, c.tolerance_percent
                 );
+            }
+            if c.what == K2_MISFIT_WHAT {
+                return "k2 is not judged: identification's model does not fit this log and the \
+                        EKF was not consistent on it, so neither gives a k2 to judge; a build \
+                        that misses the tolerance could have passed; `camspring identify` says \
+                        what the model lacks"
+                    .to_string();
             }
             let narrows = match c.name {
                 "k2" => {
