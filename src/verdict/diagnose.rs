@@ -33,7 +33,7 @@ use serde::Serialize;
 use crate::cam::forces::stroke_force_ratio;
 use crate::cam::tolerance::{build_curves, pitch_at, spring_load_n, Build};
 use crate::design::Design;
-use crate::estimate::adequacy::{whiteness, Adequacy, WHITENESS_LEVEL};
+use crate::estimate::adequacy::{whiteness, Adequacy, Whiteness, WHITENESS_LEVEL};
 use crate::estimate::adequacy::{MAX_REDUCED_CHI2, MIN_REDUCED_CHI2};
 use crate::estimate::identify::{
     mark_window, unbiased_cube, SensorNoise, CHI2_RISE_MIN, TRANSIENT_ROUNDS, TRANSIENT_SIGMAS,
@@ -1202,9 +1202,9 @@ struct WindowFit {
     fit: Fit,
     samples: Samples,
     window_s: f64,
-    /// The whiteness test of the fit's residuals beyond one window (None: too few samples,
-    /// or a position read in steps).
-    whiteness: Option<crate::estimate::adequacy::Whiteness>,
+    /// The spacing (samples) of the whiteness test's lags: the window, rounded up to whole
+    /// strides where a long log was thinned ([`WindowFit::whiteness`]).
+    lag_spacing: usize,
     /// The smaller share of the velocity's and the acceleration's mean square that is signal.
     signal_share: f64,
     /// The reduced chi-square before transients were left out: what the window choice
@@ -1357,27 +1357,6 @@ fn fit_at_window(
     let var_xd = diff.noise_variance(sg::VELOCITY, noise.position_variance_mm2, dt);
     let var_xdd = diff.noise_variance(sg::ACCELERATION, noise.position_variance_mm2, dt);
     let signal_share = share(&s.xd, var_xd).min(share(&s.xdd, var_xdd));
-    // The whiteness test at lags of whole windows, rounded up to whole strides where a long
-    // log was thinned, so that the lagged samples are fitted ones. Not where the position is
-    // read in steps: their error is a function of the position, the same on every pass, and
-    // this fit weighs it as white noise (identification models it), so its residuals are
-    // correlated over passes however right the build. On the independent rig's
-    // digital-encoder draws 0-59 the test failed on 9 of 52 fits that explained the log
-    // (reduced chi-squares 1.00 to 1.43, identification's whiteness p 0.001 to 0.86).
-    let residual_whiteness = if noise.position_quantisation.is_some() {
-        None
-    } else {
-        let standardized: Vec<f64> = residuals(design, &s, &fitted.p)
-            .iter()
-            .zip(&s.w)
-            .map(|(r, w)| r * w.sqrt())
-            .collect();
-        whiteness(
-            &standardized,
-            &s.index,
-            diff.window().div_ceil(stride) * stride,
-        )
-    };
     Ok(WindowFit {
         fit: fitted,
         samples: s,
@@ -1385,8 +1364,33 @@ fn fit_at_window(
         signal_share,
         reduced_chi2_with_transients,
         outside_stroke: outside,
-        whiteness: residual_whiteness,
+        lag_spacing: diff.window().div_ceil(stride) * stride,
     })
+}
+
+impl WindowFit {
+    /// The whiteness test of the fit's residuals beyond one window, at lags of whole windows
+    /// (rounded up to whole strides where a long log was thinned, so that the lagged samples
+    /// are fitted ones). None where there are too few samples, and where the position is read
+    /// in steps (`quantised`): their error is a function of the position, the same on every
+    /// pass, and this fit weighs it as white noise (identification models it), so its
+    /// residuals are correlated over passes however right the build. On the independent rig's
+    /// digital-encoder draws 0-59 the test failed on 9 of 52 fits that explained the log
+    /// (reduced chi-squares 1.00 to 1.43, identification's whiteness p 0.001 to 0.86).
+    /// Worked out only for the windows the choice looks at: its near lags cost up to a
+    /// window's length of products per sample.
+    fn whiteness(&self, design: &Design, quantised: bool) -> Option<Whiteness> {
+        if quantised {
+            return None;
+        }
+        let s = &self.samples;
+        let standardized: Vec<f64> = residuals(design, s, &self.fit.p)
+            .iter()
+            .zip(&s.w)
+            .map(|(r, w)| r * w.sqrt())
+            .collect();
+        whiteness(&standardized, &s.index, self.lag_spacing)
+    }
 }
 
 /// How far past either end of the designed stroke a sample is still fitted, as a share of
@@ -1533,7 +1537,11 @@ pub fn diagnose(
     // built as designed; at 1.13 s, p 0.75 and no finding.
     let explains = |c: f64| (MIN_REDUCED_CHI2..=MAX_REDUCED_CHI2).contains(&c);
     let physical = |f: &WindowFit| f.fit.p[4] >= -3.0 * f.fit.cov[(4, 4)].max(0.0).sqrt();
-    let coloured = |f: &WindowFit| f.whiteness.is_some_and(|w| w.p_value < WHITENESS_LEVEL);
+    let quantised = noise.position_quantisation.is_some();
+    let coloured = |f: &WindowFit| {
+        f.whiteness(design, quantised)
+            .is_some_and(|w| w.p_value < WHITENESS_LEVEL)
+    };
     let compared: Vec<Option<&WindowFit>> = tried
         .iter()
         .map(|t| t.as_ref().ok().filter(|f| f.signal_share >= min_share))
@@ -1592,12 +1600,12 @@ pub fn diagnose(
             }
         }
     }
+    let residual_whiteness = best.as_ref().and_then(|f| f.whiteness(design, quantised));
     let Some(WindowFit {
         fit,
         samples: s,
         window_s,
         outside_stroke,
-        whiteness: residual_whiteness,
         ..
     }) = best
     else {
