@@ -554,12 +554,7 @@ fn estimate_and_validate_from_the_command_line() {
     assert_eq!(out.status.code(), Some(1));
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["pass"], false);
-    let k2 = v["criteria"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|c| c["name"] == "k2")
-        .unwrap();
+    let k2 = common::criterion(&v, "k2");
     assert_eq!(k2["pass"], false);
 
     // Q, P0 and R can be overridden, and the JSON says what was used.

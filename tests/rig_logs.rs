@@ -1225,12 +1225,7 @@ fn validate_says_what_part_of_the_stroke_the_log_covers() {
     // The sines span 15 ... 85 % of the 20 mm stroke (70 %); the filter's window trims the ends.
     let fraction = c["stroke_fraction"].as_f64().unwrap();
     assert!((0.6..0.75).contains(&fraction), "{fraction}");
-    let coverage = v["criteria"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|c| c["name"] == "coverage")
-        .unwrap();
+    let coverage = common::criterion(&v, "coverage");
     assert_eq!(coverage["pass"], true);
     // Only the lower 40 % of the stroke: the rest is not judged, so the pass is not
     // conclusive, and the log says why.
@@ -1368,12 +1363,7 @@ fn a_log_that_steps_between_holds_covers_the_holds_and_not_the_stroke_between() 
     // judged from a fit that does not explain the log.)
     assert_eq!(code, Some(0), "{v}");
     assert_eq!(v["conclusive"], false, "{v}");
-    let k2 = v["criteria"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|c| c["name"] == "k2")
-        .unwrap();
+    let k2 = common::criterion(&v, "k2");
     assert_eq!(k2["pass"], true, "{k2}");
     assert!(
         k2["what"]

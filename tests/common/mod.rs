@@ -120,3 +120,11 @@ pub fn column_map(time: &str, force: &str, position: &str) -> camspring::estimat
         ..ColumnMap::default()
     }
 }
+
+/// The criterion named `name` in a `validate --json` report (its `criteria[]`).
+pub fn criterion<'a>(report: &'a serde_json::Value, name: &str) -> &'a serde_json::Value {
+    report["criteria"]
+        .as_array()
+        .and_then(|all| all.iter().find(|c| c["name"] == name))
+        .unwrap_or_else(|| panic!("no criterion {name} in {report}"))
+}
