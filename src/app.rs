@@ -1185,17 +1185,10 @@ pub fn run_validate(
         let (c, mut cov) =
             crate::verdict::validate::coverage(&designed, lo, hi, spec.law.xmax_mm(), crossed);
         if let Some(clip) = clip {
-            let clipped = if clip.high {
-                format!("from x = {:.2} mm on", clip.from_mm)
-            } else {
-                format!("up to x = {:.2} mm", clip.to_mm)
-            };
-            cov.warnings.push(format!(
-                "coverage counts x = {lo:.2} ... {hi:.2} mm, where the force is measured: \
-                 {clipped} it stands at its {} reading, {} N",
-                if clip.high { "largest" } else { "smallest" },
-                clip.force_n
-            ));
+            cov.warnings
+                .push(crate::verdict::validate::clipped_span_warning(
+                    lo, hi, &clip,
+                ));
         }
         // The strokes' force is the diagnosis's bins, the dynamics it fitted taken out: where
         // its forward model does not explain the log, the verdict says so.

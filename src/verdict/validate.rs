@@ -1032,6 +1032,22 @@ pub fn measured_span(
     (from, to.max(from), by)
 }
 
+/// The coverage's warning where a clip narrowed the measured span to `lo ... hi` (mm)
+/// ([`measured_span`]).
+pub fn clipped_span_warning(lo: f64, hi: f64, clip: &crate::estimate::log::ForceClip) -> String {
+    let clipped = if clip.high {
+        format!("from x = {:.2} mm on", clip.from_mm)
+    } else {
+        format!("up to x = {:.2} mm", clip.to_mm)
+    };
+    format!(
+        "coverage counts x = {lo:.2} ... {hi:.2} mm, where the force is measured: {clipped} it \
+         stands at its {} reading, {} N",
+        if clip.high { "largest" } else { "smallest" },
+        clip.force_n
+    )
+}
+
 /// The chance, over all of a log's bins, that a true law's binned curve leaves `force_max`'s
 /// allowance somewhere ([`bin_sigmas`]).
 pub const BINS_FALSE_FAIL: f64 = 0.05;
