@@ -818,6 +818,23 @@ fn a_log_of_another_designs_part_does_not_fit_the_diagnosis_and_is_not_revised_o
         "{v}"
     );
     assert!(!d.join("rev/paper-B.toml").exists());
+
+    // A far softer part's log against a stiffer design: the weights take the position's noise
+    // through the designed stiffness and expect far more scatter than the log has.
+    let ankle = spec_path("ankle.toml");
+    let out = camspring(d, &["simulate", paper.as_str(), "-o", "paper.csv"]);
+    assert_eq!(out.status.code(), Some(0));
+    let out = camspring(d, &["diagnose", ankle.as_str(), "paper.csv", "--json"]);
+    let g: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(out.status.code(), Some(1), "{}", g["fit"]);
+    assert_eq!(g["fit"]["status"], "does-not-fit", "{}", g["fit"]);
+    let chi2 = g["fit"]["reduced_chi2"].as_f64().unwrap();
+    assert!(chi2 < 0.5, "{chi2}");
+    let reasons = g["fit"]["reasons"].to_string();
+    assert!(
+        reasons.contains("below 0.5") && reasons.contains("another design's part"),
+        "{reasons}"
+    );
 }
 
 #[test]
