@@ -425,9 +425,10 @@ fn force_clip_warning(c: &crate::estimate::log::ForceClip) -> String {
     };
     format!(
         "the force stands at its {which} value, {} N, on {} samples while the position moves \
-         over x = {:.3} ... {:.3} mm: {cause}; the spring's force is not measured there, and \
-         what the fit and the verdict say of that part of the stroke is not from this log; \
-         record it with a load cell whose range covers the spring's force",
+         over x = {:.3} ... {:.3} mm: {cause}; the spring's force is not measured there: \
+         identification and the diagnosis leave those readings out (and, where they hold an \
+         end of the stroke, the stroke beyond their onset), validate's coverage ends there, and \
+         the EKF, driven by the force as read, runs through them; record it with a load cell whose range covers the spring's force",
         c.force_n, c.samples, c.from_mm, c.to_mm
     )
 }
@@ -1175,7 +1176,7 @@ pub fn run_validate(
         // Where the force stands clipped at an end of the log's positions, the stroke there
         // was travelled but not measured: coverage counts the rest.
         let (lo, hi, clip) =
-            crate::verdict::validate::measured_span(lo, hi, &log.reading().force_clips);
+            crate::estimate::log::measured_span(lo, hi, &log.reading().force_clips);
         let crossed = crate::verdict::validate::crossed_without_dwelling_mm(
             &log.position_mm,
             lo,

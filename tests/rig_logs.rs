@@ -1162,6 +1162,31 @@ fn a_load_cell_at_the_top_of_its_range_is_named_with_where_it_stood() {
     let whole = coverage("calib.csv");
     assert!(whole["to_mm"].as_f64().unwrap() > from + 1.0, "{whole}");
     assert!(whole["force_to_n"].as_f64().unwrap() > 75.0, "{whole}");
+    // Identification leaves the clipped readings out, rather than finding them as transients
+    // (4189 samples until 2026-12-01), and finds the simulated law.
+    let truth: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("calib.truth.json")).unwrap())
+            .unwrap();
+    let out = camspring(d, &["identify", "clipped.csv", "--json"]);
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["transient_samples"], 0, "{}", v["transient_samples"]);
+    for name in ["k2_per_mm", "mu_n"] {
+        let p = &v["parameters"];
+        let z = (p[name].as_f64().unwrap() - truth["law"][name].as_f64().unwrap())
+            / p[&format!("{name}_std")].as_f64().unwrap();
+        assert!(z.abs() < 3.0, "{name}: z {z}");
+    }
+    // So does the diagnosis: its bins end short of where the force first stood at 60 N.
+    let out = camspring(d, &["diagnose", &paper, "clipped.csv", "--json"]);
+    let g: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(
+        g["clipped_samples"].as_u64().unwrap() > 1000,
+        "{}",
+        g["clipped_samples"]
+    );
+    for b in g["bins"].as_array().unwrap() {
+        assert!(b["x_mm"].as_f64().unwrap() < from, "{b}");
+    }
 }
 
 #[test]

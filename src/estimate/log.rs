@@ -791,6 +791,37 @@ pub struct ForceClip {
     pub to_mm: f64,
 }
 
+/// How near an end of the logged deflections (as a share of their range) a clipped force's
+/// positions must reach for [`measured_span`] to take that end off.
+pub const CLIP_EDGE_SHARE: f64 = 0.02;
+
+/// The logged deflections `lo ... hi` (mm) where the force was measured: a force clipped at
+/// the top or bottom of the load cell's range ([`ForceClip`]) over positions that reach an
+/// end of the log's takes that end off, from the first clipped position on (a spring's force
+/// rises with deflection, so the clip holds the stroke's end). validate's coverage counts
+/// what is left, and identification and the diagnosis fit only the samples inside it
+/// ([`CalibrationLog::unmeasured_force`]): the stroke beyond a clip is not measured, though
+/// the rod travelled it. A clip inside the range (neither end) leaves it as it is. Returns the
+/// span and, where it was narrowed, the clip that narrowed it.
+pub fn measured_span(
+    lo: f64,
+    hi: f64,
+    clips: &[Option<ForceClip>],
+) -> (f64, f64, Option<ForceClip>) {
+    let edge = CLIP_EDGE_SHARE * (hi - lo).max(0.0);
+    let (mut from, mut to, mut by) = (lo, hi, None);
+    for c in clips.iter().flatten() {
+        if c.to_mm >= hi - edge && c.from_mm < to {
+            to = c.from_mm;
+            by = Some(*c);
+        } else if c.from_mm <= lo + edge && c.to_mm > from {
+            from = c.to_mm;
+            by = Some(*c);
+        }
+    }
+    (from, to.max(from), by)
+}
+
 /// The fewest samples at a force extreme that [`ClipWatch`] calls a clip (and at least
 /// [`CLIP_MIN_SHARE`] of the log).
 pub const CLIP_MIN_SAMPLES: usize = 10;
@@ -989,6 +1020,33 @@ impl CalibrationLog {
             mean_interval_s: Some(self.dt_s()).filter(|dt| dt.is_finite()),
             force_clips: ClipWatch::of(self).clips(),
         }
+    }
+
+    /// Which of the log's samples `offset .. offset + n` read a force that is not the spring's:
+    /// those at a clip's value ([`ForceClip`]), and, where a clip holds an
+    /// end of the logged positions, every sample from its first clipped position on
+    /// ([`measured_span`]). There no sample is clipped below the clip's
+    /// onset, so those fitted are not cut off at the load cell's top.
+    pub fn unmeasured_force(&self, offset: usize, n: usize) -> Vec<bool> {
+        let clips = self.reading().force_clips;
+        if clips.iter().all(Option::is_none) {
+            return vec![false; n];
+        }
+        let (lo, hi) = self
+            .position_mm
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+                (a.min(x), b.max(x))
+            });
+        let (from, to, _) = measured_span(lo, hi, &clips);
+        (offset..offset + n)
+            .map(|i| {
+                let (x, f) = (self.position_mm[i], self.force_n[i]);
+                (to < hi && x >= to)
+                    || (from > lo && x <= from)
+                    || clips.iter().flatten().any(|c| f == c.force_n)
+            })
+            .collect()
     }
 
     /// Moves the encoder zero: every position becomes x - `offset_mm`.

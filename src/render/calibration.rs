@@ -1392,6 +1392,14 @@ pub fn format_diagnosis(d: &crate::verdict::diagnose::Diagnosis) -> String {
             d.outside_stroke_samples
         );
     }
+    if d.clipped_samples > 0 {
+        let _ = writeln!(
+            s,
+            "  {} samples where the force stands clipped left out: the load cell did not \
+             measure the spring's force there",
+            d.clipped_samples
+        );
+    }
     s
 }
 

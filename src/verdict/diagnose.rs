@@ -339,6 +339,10 @@ pub struct Diagnosis {
     /// Samples left out because their position lies beyond the designed stroke by more than
     /// its margin ([`STROKE_MARGIN`]): the design's forward model does not reach them.
     pub outside_stroke_samples: usize,
+    /// Samples left out because the force stands clipped there, at the top or bottom of the
+    /// load cell's range ([`crate::estimate::log::measured_span`]): their readings are not the
+    /// spring's force.
+    pub clipped_samples: usize,
     /// The force channel's delay the force was re-timed by before the diagnosis, if any (set
     /// by the caller that re-timed it).
     pub force_delay: Option<crate::estimate::retime::ForceDelayFit>,
@@ -446,6 +450,7 @@ impl Diagnosis {
             windows_tried: Vec::new(),
             reversal_travel_share: 1.0,
             outside_stroke_samples: 0,
+            clipped_samples: 0,
         }
     }
 }
@@ -1218,6 +1223,8 @@ struct WindowFit {
     reduced_chi2_with_transients: f64,
     /// Samples beyond the designed stroke, left out ([`outside_stroke`]).
     outside_stroke: usize,
+    /// Samples where the force stands clipped, left out ([`CalibrationLog::unmeasured_force`]).
+    clipped: usize,
 }
 
 /// Smooths the log over `window` samples and fits.
@@ -1251,6 +1258,16 @@ fn fit_at_window(
     // truth, and the true law failed force_rms at 69.5 %. Those samples are left out.
     let mut excluded = outside_stroke(design, &motion.x, start[3], free[3]);
     let outside = excluded.iter().filter(|&&e| e).count();
+    // Nor is a force the load cell clipped the spring's: on the paper spec's log clipped at
+    // 60 N, the bins at the clip's onset were judged (the loading bin at 15.50 mm read
+    // 59.7 +- 1.4 N against 61.8 N designed) and the preload came out 0.112 +- 0.013 mm long
+    // against 0.076 +- 0.010 mm from the same log unclipped. Left out, the bins end at
+    // 14.97 mm, short of the clip's onset at 15.07 mm, and the preload is 0.094 +- 0.010 mm.
+    let mut clipped = 0;
+    for (e, c) in excluded.iter_mut().zip(log.unmeasured_force(diff.half, n)) {
+        clipped += usize::from(c && !*e);
+        *e |= c;
+    }
     let noise_hides = || {
         DiagnoseError::Log(format!(
             "at a window of {:.3} s the smoothed velocity's and acceleration's noise outweighs \
@@ -1369,6 +1386,7 @@ fn fit_at_window(
         signal_share,
         reduced_chi2_with_transients,
         outside_stroke: outside,
+        clipped,
         lag_spacing: diff.window().div_ceil(stride) * stride,
     })
 }
@@ -1611,6 +1629,7 @@ pub fn diagnose(
         samples: s,
         window_s,
         outside_stroke,
+        clipped,
         ..
     }) = best
     else {
@@ -1689,6 +1708,7 @@ pub fn diagnose(
         sg_window_s: window_s,
         windows_tried: candidates,
         outside_stroke_samples: outside_stroke,
+        clipped_samples: clipped,
         // The moving samples' velocities, each signed as its friction is.
         reversal_travel_share: crate::estimate::identify::reversal_travel_share(
             s.xd.iter()

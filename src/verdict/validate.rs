@@ -1002,38 +1002,8 @@ pub fn crossed_without_dwelling_mm(positions: &[f64], lo: f64, hi: f64, xmax_mm:
         * width
 }
 
-/// How near an end of the logged deflections (as a share of their range) a clipped force's
-/// positions must reach for [`measured_span`] to take that end off.
-pub const CLIP_EDGE_SHARE: f64 = 0.02;
-
-/// The logged deflections `lo ... hi` (mm) where the force was measured: a force clipped at
-/// the top or bottom of the load cell's range ([`crate::estimate::log::ForceClip`]) over
-/// positions that reach an end of the log's takes that end off, from the first clipped
-/// position on (a spring's force rises with deflection, so the clip holds the stroke's end).
-/// Coverage counts what is left: the stroke beyond a clip is not measured, though the rod
-/// travelled it. A clip inside the range (neither end) leaves it as it is. Returns the span
-/// and, where it was narrowed, the clip that narrowed it.
-pub fn measured_span(
-    lo: f64,
-    hi: f64,
-    clips: &[Option<crate::estimate::log::ForceClip>],
-) -> (f64, f64, Option<crate::estimate::log::ForceClip>) {
-    let edge = CLIP_EDGE_SHARE * (hi - lo).max(0.0);
-    let (mut from, mut to, mut by) = (lo, hi, None);
-    for c in clips.iter().flatten() {
-        if c.to_mm >= hi - edge && c.from_mm < to {
-            to = c.from_mm;
-            by = Some(*c);
-        } else if c.from_mm <= lo + edge && c.to_mm > from {
-            from = c.to_mm;
-            by = Some(*c);
-        }
-    }
-    (from, to.max(from), by)
-}
-
 /// The coverage's warning where a clip narrowed the measured span to `lo ... hi` (mm)
-/// ([`measured_span`]).
+/// ([`crate::estimate::log::measured_span`]).
 pub fn clipped_span_warning(lo: f64, hi: f64, clip: &crate::estimate::log::ForceClip) -> String {
     let clipped = if clip.high {
         format!("from x = {:.2} mm on", clip.from_mm)
