@@ -1311,6 +1311,12 @@ pub fn run_validate(
                     judged_k2,
                     judged_k2_std,
                 ));
+            // A rod against a stop bends the law identification fits (and so the k2 judged).
+            cov.warnings.extend(
+                id.position_stop
+                    .as_ref()
+                    .map(crate::verdict::validate::position_stop_warning),
+            );
             // And a force logged in another unit, as the designed force divided by its size.
             cov.warnings
                 .extend(crate::verdict::validate::force_unit_hint(

@@ -312,6 +312,9 @@ impl Serialize for Estimates {
 pub struct Identification {
     /// Every parameter's estimate.
     pub parameters: Estimates,
+    /// Where the rod stands at an end of the logged positions while the force moves on
+    /// beyond the law and friction ([`PositionStop`]): the model does not fit such a log.
+    pub position_stop: Option<PositionStop>,
     /// Parameters this log cannot identify.
     pub not_identifiable: Vec<String>,
     /// k2 from the quasi-static stage alone (1/mm).
@@ -1856,13 +1859,46 @@ pub(super) fn fit_model(
 }
 
 /// [`fit_model`] through the parallel filter where the log allows it and `parallel_allowed`,
-/// else directly.
+/// else directly. Where the fit finds the rod against a stop ([`position_stop`]), the samples
+/// at that end ([`PositionStop::from_mm`] on) are left out and the law fitted again; where
+/// that fails, the first fit is returned as not fitting the log.
 fn fit_regression(
     log: &CalibrationLog,
     noise: &SensorNoise,
     diff: &Differentiator,
     inertia: Inertia,
     parallel_allowed: bool,
+) -> Result<Identification, IdentifyError> {
+    let first = fit_regression_beyond(log, noise, diff, inertia, parallel_allowed, None)?;
+    let Some(stop) = first.position_stop else {
+        return Ok(first);
+    };
+    match fit_regression_beyond(log, noise, diff, inertia, parallel_allowed, Some(&stop)) {
+        Ok(mut refit) => {
+            refit.position_stop = Some(stop);
+            Ok(refit)
+        }
+        Err(e) => {
+            let mut first = first;
+            first.adequacy.status = FitStatus::DoesNotFit;
+            first
+                .adequacy
+                .reasons
+                .insert(0, format!("{}; fitted without them, {e}", stop.reason()));
+            Ok(first)
+        }
+    }
+}
+
+/// [`fit_regression`], with the samples from a stop's [`PositionStop::from_mm`] on left out
+/// (`stop`).
+fn fit_regression_beyond(
+    log: &CalibrationLog,
+    noise: &SensorNoise,
+    diff: &Differentiator,
+    inertia: Inertia,
+    parallel_allowed: bool,
+    stop: Option<&PositionStop>,
 ) -> Result<Identification, IdentifyError> {
     let dt = log.dt_s();
     let h = diff.half;
@@ -1960,7 +1996,21 @@ fn fit_regression(
     // samples were left out as transients (a reduced chi-square of 5.41 with them), the window
     // fell from 1.21 s to 0.43 s, and k2 from the quasi-static samples alone was 0.224 /mm
     // against 0.274 unclipped.
-    let unmeasured = log.unmeasured_force(h, n);
+    let mut unmeasured = log.unmeasured_force(h, n);
+    // Against a stop, and within half a window of it: the smoothed motion there bends
+    // round the stop's corner, where the rod stopped at once (the paper spec's log stopped at
+    // 15 mm, fitted without the samples at the stop alone, had k2 9 of its standard
+    // deviations high at a 0.43 s window).
+    if let Some(stop) = stop {
+        let mut filled_to = 0;
+        for i in (0..n).filter(|&i| stop.holds(all.x[i])) {
+            let (from, to) = (i.saturating_sub(h).max(filled_to), (i + h + 1).min(n));
+            if from < to {
+                unmeasured[from..to].fill(true);
+            }
+            filled_to = filled_to.max(to);
+        }
+    }
     // Stage 1: k2 on quasi-static samples, model mu*exp(k2 x) + F0.
     let qs: Vec<usize> = (0..n)
         .filter(|&i| motion[i].abs() <= 0.1 * vmax && !unmeasured[i])
@@ -2343,6 +2393,7 @@ fn fit_regression(
         reduced_chi2,
         whiteness(&residuals, &rows.index, correlation_span),
     );
+    let position_stop = position_stop(&p, &active, &all, &motion, band, &unmeasured);
     let parameters = Estimates(std::array::from_fn(|k| {
         if active[k] {
             Estimate {
@@ -2366,6 +2417,7 @@ fn fit_regression(
     };
     Ok(Identification {
         parameters,
+        position_stop,
         not_identifiable,
         k2_quasi_static_per_mm: p1[K2],
         covariance: idx
@@ -2401,6 +2453,144 @@ fn fit_regression(
         inertia_attenuation,
         regression,
     })
+}
+
+/// A rod that stands at an end of the logged positions while the force moves on beyond the
+/// law and friction: a rod pushed against a stop, or an encoder at the end of its range
+/// while the rod travels on. Found by identification after its fit, and left out.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct PositionStop {
+    /// Where the rod stands (mm): the smoothed position's mean over those samples.
+    pub x_mm: f64,
+    /// At the log's largest position (true) or its smallest.
+    pub high: bool,
+    /// Samples at rest there whose force lies off the fitted law by more than the fitted
+    /// Coulomb friction and [`TRANSIENT_SIGMAS`] of the row's noise.
+    pub samples: usize,
+    /// The least force over those samples (N).
+    pub force_from_n: f64,
+    /// The largest (N).
+    pub force_to_n: f64,
+    /// How far the force there goes beyond the law and its friction, at most (N).
+    pub excess_n: f64,
+    /// Where the samples left out begin (mm): the end of the smoothed positions less the
+    /// band the stop was looked for in. From here on (down, at the bottom) the fit has none.
+    pub from_mm: f64,
+}
+
+impl PositionStop {
+    /// Whether the smoothed position `x_mm` lies where the stop holds the rod.
+    pub fn holds(&self, x_mm: f64) -> bool {
+        if self.high {
+            x_mm >= self.from_mm
+        } else {
+            x_mm <= self.from_mm
+        }
+    }
+
+    /// What the stop is and what was done: "the rod stands at ...".
+    pub fn reason(&self) -> String {
+        format!(
+            "the rod stands at x = {:.3} mm, the log's {} position, on {} samples while the \
+             force moves over {:.2} ... {:.2} N, up to {:.2} N off the law beyond its friction: \
+             a rod against a stop, or an encoder at the end of its range while the rod travels \
+             on; the force there is not the spring's, so the samples {} x = {:.3} mm are left \
+             out of the fit (record a run that stays off the stops)",
+            self.x_mm,
+            if self.high { "largest" } else { "smallest" },
+            self.samples,
+            self.force_from_n,
+            self.force_to_n,
+            self.excess_n,
+            if self.high { "from" } else { "up to" },
+            self.from_mm
+        )
+    }
+}
+
+/// The least excess of a stop's force over the law and its friction, as a share of the logged
+/// force's range, for identification to call it a stop ([`PositionStop`]). A rod pushed
+/// against a stop carries what the actuator adds (the paper spec's log stopped at 15 mm: up to
+/// 31 N of an 87 N range); a rod that rests where the model fits less well strays by less.
+pub const STOP_MIN_FORCE_SHARE: f64 = 0.1;
+
+/// The rod against a stop ([`PositionStop`]): the samples at rest (`motion` within `band`,
+/// the force measured: not `unmeasured`) whose force lies off the fitted law `p` by more than
+/// its Coulomb friction and [`TRANSIENT_SIGMAS`] of the row's noise, at least
+/// [`super::log::CLIP_MIN_SAMPLES`] and [`super::log::CLIP_MIN_SHARE`] of the samples, all
+/// within [`super::log::CLIP_EDGE_SHARE`] of the range of smoothed positions from one end
+/// (above the law at the top, below it at the bottom), and off the law beyond the friction
+/// by at least [`STOP_MIN_FORCE_SHARE`] of the logged force's range somewhere. A rod held by
+/// friction at a turn (the independent rig's digital-encoder draw 8, d0 3.25 N: 3407 samples
+/// at its top position while the force moved 5.5 N) stays within the friction, and a rest at
+/// a servo's hold within the noise. Without the rule on the sign, the sweep's draw 1003 (a
+/// force-controlled rod at rest on all but 275 of its samples, whose fit does not explain it)
+/// was named: 234 samples at its smallest position, up to 4.3 N above the law.
+fn position_stop(
+    p: &V7,
+    active: &Active,
+    all: &Rows,
+    motion: &[f64],
+    band: f64,
+    unmeasured: &[bool],
+) -> Option<PositionStop> {
+    let n = all.x.len();
+    let (lo, hi) = all
+        .x
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+            (a.min(x), b.max(x))
+        });
+    let edge = super::log::CLIP_EDGE_SHARE * (hi - lo);
+    let d0 = if active[D0] { p[D0].abs() } else { 0.0 };
+    let needed =
+        super::log::CLIP_MIN_SAMPLES.max((super::log::CLIP_MIN_SHARE * n as f64).ceil() as usize);
+    let (f_lo, f_hi) = all
+        .f
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &f| {
+            (a.min(f), b.max(f))
+        });
+    let mut found = [(0usize, 0.0_f64, f64::INFINITY, f64::NEG_INFINITY, 0.0_f64); 2];
+    for i in (0..n).filter(|&i| motion[i].abs() <= band && !unmeasured[i]) {
+        let (f, _) = model(p, all, i);
+        let frictionless = all.f[i] - (f - p[D0] * all.sgn[i]);
+        if frictionless.abs() <= d0 + TRANSIENT_SIGMAS * row_variance(p, all, i).sqrt() {
+            continue;
+        }
+        let excess = frictionless.abs() - d0;
+        let x = all.x[i];
+        // Against a stop at the top the force stands above the law (the actuator pushes the
+        // rod into it; an encoder at the top of its range reads short of the rod), at the
+        // bottom below it.
+        let side = if x >= hi - edge && frictionless > 0.0 {
+            0
+        } else if x <= lo + edge && frictionless < 0.0 {
+            1
+        } else {
+            continue;
+        };
+        let s = &mut found[side];
+        s.0 += 1;
+        s.1 += x;
+        s.2 = s.2.min(all.f[i]);
+        s.3 = s.3.max(all.f[i]);
+        s.4 = s.4.max(excess);
+    }
+    found
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.0 >= needed && s.4 >= STOP_MIN_FORCE_SHARE * (f_hi - f_lo))
+        .max_by_key(|(_, s)| s.0)
+        .map(|(side, s)| PositionStop {
+            x_mm: s.1 / s.0 as f64,
+            high: side == 0,
+            samples: s.0,
+            force_from_n: s.2,
+            force_to_n: s.3,
+            excess_n: s.4,
+            from_mm: if side == 0 { hi - edge } else { lo + edge },
+        })
 }
 
 /// The profile over k2: at each of [`PROFILE_POINTS`] values of k2 (log-spaced over

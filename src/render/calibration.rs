@@ -186,6 +186,7 @@ pub fn identification_json(
         "inertia_attenuation": id.inertia_attenuation,
         "regression": id.regression,
         "sign_fault": id.sign_fault,
+        "position_stop": id.position_stop,
         "fit": {
             "status": id.adequacy.status,
             "reduced_chi2": id.adequacy.reduced_chi2,
@@ -436,6 +437,9 @@ pub fn format_identification(
              never reverses).",
             id.not_identifiable.join(", ")
         );
+    }
+    if let Some(stop) = &id.position_stop {
+        let _ = writeln!(s, "warning: {}", stop.reason());
     }
     if id.transient_samples > 0 {
         let _ = writeln!(

@@ -1002,6 +1002,12 @@ pub fn crossed_without_dwelling_mm(positions: &[f64], lo: f64, hi: f64, xmax_mm:
         * width
 }
 
+/// The coverage's warning where identification found the rod standing against a stop
+/// ([`crate::estimate::identify::PositionStop`]).
+pub fn position_stop_warning(stop: &crate::estimate::identify::PositionStop) -> String {
+    format!("identification: {}", stop.reason())
+}
+
 /// The coverage's warning where a clip narrowed the measured span to `lo ... hi` (mm)
 /// ([`crate::estimate::log::measured_span`]).
 pub fn clipped_span_warning(lo: f64, hi: f64, clip: &crate::estimate::log::ForceClip) -> String {
