@@ -1133,19 +1133,27 @@ pub fn run_validate(
         .map_or(String::new(), |n| n.to_string_lossy().into_owned());
     // The force is judged stroke by stroke from the diagnosis of the build (the design's
     // forward model with the build free), loading and unloading apart; a log it cannot
-    // diagnose keeps the single quasi-static curve.
-    let diagnosis = crate::verdict::diagnose::diagnose(
-        &design,
-        &log,
-        &noise,
-        opts.window_s,
-        PositionOffset::None,
-    )
-    .ok();
+    // diagnose keeps the single quasi-static curve. Where identification finds the rod against
+    // a stop, the log is diagnosed again without it.
+    let diagnose = |stop: Option<&crate::estimate::identify::PositionStop>| {
+        crate::verdict::diagnose::diagnose_beyond(
+            &design,
+            &log,
+            &noise,
+            opts.window_s,
+            PositionOffset::None,
+            stop,
+        )
+        .ok()
+    };
+    let diagnosis = std::cell::RefCell::new(diagnose(None));
     let judge_strokes = |criteria: &mut Vec<crate::verdict::validate::Criterion>,
                          exits: &mut Vec<crate::verdict::validate::BandExit>|
      -> bool {
-        let Some(d) = &diagnosis else { return false };
+        let diagnosis = diagnosis.borrow();
+        let Some(d) = diagnosis.as_ref() else {
+            return false;
+        };
         let (stroke, stroke_exits) = crate::verdict::validate::stroke_criteria(
             d,
             &designed,
@@ -1159,14 +1167,15 @@ pub fn run_validate(
         true
     };
     // How the log was read, then the diagnosis, close the page.
-    let diagnosis_html =
+    let diagnosis_html = || {
         crate::render::html::log_reading_section(&log_reading.notes, &log_reading.warnings)
-            + &diagnosis.as_ref().map_or(String::new(), |d| {
+            + &diagnosis.borrow().as_ref().map_or(String::new(), |d| {
                 crate::render::html::diagnosis_section(
                     d,
                     &crate::render::calibration::diagnosis_svg(d),
                 )
-            });
+            })
+    };
     // Every verdict also states, and judges, what part of the designed stroke the log covers;
     // then its pass, conclusive and judged flags are settled over all its criteria.
     let judge_coverage = |criteria: &mut Vec<crate::verdict::validate::Criterion>,
@@ -1193,7 +1202,11 @@ pub fn run_validate(
         }
         // The strokes' force is the diagnosis's bins, the dynamics it fitted taken out: where
         // its forward model does not explain the log, the verdict says so.
-        if let Some(d) = diagnosis.as_ref().filter(|d| d.fit.problem().is_some()) {
+        if let Some(d) = diagnosis
+            .borrow()
+            .as_ref()
+            .filter(|d| d.fit.problem().is_some())
+        {
             cov.warnings.push(format!(
                 "the design's forward model does not fit this log ({}): the force curve is \
                  judged with the inertia and damping a misfit took out; `camspring diagnose` \
@@ -1235,6 +1248,9 @@ pub fn run_validate(
                 }
             };
             let consistent = est.as_ref().filter(|e| e.consistency.consistent);
+            if let Some(d) = id.position_stop.as_ref().and_then(|s| diagnose(Some(s))) {
+                diagnosis.replace(Some(d));
+            }
             // The EKF and identification see a mixture of the loading and unloading strokes:
             // their k2 is judged against the exponents of the designed build's two curves over
             // the logged range, the stiffness line against its mean curve (the law itself when
@@ -1326,7 +1342,7 @@ pub fn run_validate(
                     v.range_max_mm,
                 ));
             v.coverage = Some(cov);
-            v.diagnosis = diagnosis.clone();
+            v.diagnosis = diagnosis.borrow().clone();
             // The measured force-deflection points come from the quasi-static curve.
             let points = validate_curve(&designed, &log, &noise, tolerance, band.as_ref());
             let force_svg = crate::render::calibration::force_points_svg(
@@ -1344,7 +1360,7 @@ pub fn run_validate(
                 est.as_ref().map(|_| svg_text.as_str()),
                 &log_name,
                 &force_svg,
-                &diagnosis_html,
+                &diagnosis_html(),
             );
             (Verdict::Law(v), svg_text, html)
         }
@@ -1360,13 +1376,13 @@ pub fn run_validate(
             ((v.pass, v.conclusive, v.judged), cov) =
                 judge_coverage(&mut v.criteria, v.pass, v.range_min_mm, v.range_max_mm);
             v.coverage = Some(cov);
-            v.diagnosis = diagnosis.clone();
+            v.diagnosis = diagnosis.borrow().clone();
             let svg_text = curve_validation_svg(&v);
             let html = crate::render::html::curve_validation_html(
                 &v,
                 &svg_text,
                 &log_name,
-                &diagnosis_html,
+                &diagnosis_html(),
             );
             (Verdict::Curve(v), svg_text, html)
         }
@@ -1819,10 +1835,19 @@ fn diagnose_log(
     let raw = (opts.force_delay == ForceDelay::Auto).then(|| (log.clone(), noise));
     let force_delay = retime_in_memory(&mut log, &mut noise, opts.force_delay, opts.window_s)?;
     let (reduced, identification) = identify_for_verdict(&log, &noise, opts.window_s)?;
+    // A rod against a stop, which identification finds, is left out of the diagnosis too.
+    let stop = identification.as_ref().and_then(|i| i.position_stop);
     let diagnose = |log: &crate::estimate::log::CalibrationLog,
                     noise: &crate::estimate::identify::SensorNoise| {
-        crate::verdict::diagnose::diagnose(&design, log, noise, opts.window_s, opts.zero)
-            .map_err(|e| Error::Argument(format!("diagnose {}: {e}", log_path.display())))
+        crate::verdict::diagnose::diagnose_beyond(
+            &design,
+            log,
+            noise,
+            opts.window_s,
+            opts.zero,
+            stop.as_ref(),
+        )
+        .map_err(|e| Error::Argument(format!("diagnose {}: {e}", log_path.display())))
     };
     let mut diagnosis = diagnose(&log, &noise)?;
     diagnosis.force_delay = force_delay;

@@ -1404,6 +1404,14 @@ pub fn format_diagnosis(d: &crate::verdict::diagnose::Diagnosis) -> String {
             d.clipped_samples
         );
     }
+    if d.stop_samples > 0 {
+        let _ = writeln!(
+            s,
+            "  {} samples against the stop identification found, and within half a window of \
+             it, left out",
+            d.stop_samples
+        );
+    }
     s
 }
 
