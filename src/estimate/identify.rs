@@ -2002,13 +2002,8 @@ fn fit_regression_beyond(
     // 15 mm, fitted without the samples at the stop alone, had k2 9 of its standard
     // deviations high at a 0.43 s window).
     if let Some(stop) = stop {
-        let mut filled_to = 0;
-        for i in (0..n).filter(|&i| stop.holds(all.x[i])) {
-            let (from, to) = (i.saturating_sub(h).max(filled_to), (i + h + 1).min(n));
-            if from < to {
-                unmeasured[from..to].fill(true);
-            }
-            filled_to = filled_to.max(to);
+        for (u, held) in unmeasured.iter_mut().zip(stop.held(&all.x, h)) {
+            *u |= held;
         }
     }
     // Stage 1: k2 on quasi-static samples, model mu*exp(k2 x) + F0.
@@ -2486,6 +2481,22 @@ impl PositionStop {
         } else {
             x_mm <= self.from_mm
         }
+    }
+
+    /// Which of the smoothed positions `x` the stop holds, and every sample within `half` of
+    /// one: there the smoothed motion bends round the stop's corner.
+    pub fn held(&self, x: &[f64], half: usize) -> Vec<bool> {
+        let n = x.len();
+        let mut mask = vec![false; n];
+        let mut filled_to = 0;
+        for i in (0..n).filter(|&i| self.holds(x[i])) {
+            let (from, to) = (i.saturating_sub(half).max(filled_to), (i + half + 1).min(n));
+            if from < to {
+                mask[from..to].fill(true);
+            }
+            filled_to = filled_to.max(to);
+        }
+        mask
     }
 
     /// What the stop is and what was done: "the rod stands at ...".
