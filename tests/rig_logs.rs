@@ -1179,13 +1179,19 @@ fn a_load_cell_at_the_top_of_its_range_is_named_with_where_it_stood() {
     // So does the diagnosis: its bins end short of where the force first stood at 60 N.
     let out = camspring(d, &["diagnose", &paper, "clipped.csv", "--json"]);
     let g: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_diagnosis_left_out(&g, "clipped_samples", from);
+}
+
+/// Asserts that the diagnosis `g` left out more than 1000 samples by its count `left_out`
+/// and that its bins all lie short of `from_mm`.
+fn assert_diagnosis_left_out(g: &serde_json::Value, left_out: &str, from_mm: f64) {
     assert!(
-        g["clipped_samples"].as_u64().unwrap() > 1000,
-        "{}",
-        g["clipped_samples"]
+        g[left_out].as_u64().unwrap() > 1000,
+        "{left_out}: {}",
+        g[left_out]
     );
     for b in g["bins"].as_array().unwrap() {
-        assert!(b["x_mm"].as_f64().unwrap() < from, "{b}");
+        assert!(b["x_mm"].as_f64().unwrap() < from_mm, "{b}");
     }
 }
 
@@ -1272,15 +1278,7 @@ fn a_rod_against_a_stop_is_named_and_left_out_of_the_fit() {
         force_max["deviation_percent"].as_f64().unwrap() < 0.5,
         "{force_max}"
     );
-    let g = &v["diagnosis"];
-    assert!(
-        g["stop_samples"].as_u64().unwrap() > 1000,
-        "{}",
-        g["stop_samples"]
-    );
-    for b in g["bins"].as_array().unwrap() {
-        assert!(b["x_mm"].as_f64().unwrap() < from, "{b}");
-    }
+    assert_diagnosis_left_out(&v["diagnosis"], "stop_samples", from);
 }
 
 #[test]
