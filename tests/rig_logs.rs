@@ -1164,22 +1164,31 @@ fn a_load_cell_at_the_top_of_its_range_is_named_with_where_it_stood() {
     assert!(whole["force_to_n"].as_f64().unwrap() > 75.0, "{whole}");
     // Identification leaves the clipped readings out, rather than finding them as transients
     // (4189 samples until 2026-12-01), and finds the simulated law.
-    let truth: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(d.join("calib.truth.json")).unwrap())
-            .unwrap();
+    let truth = simulated_truth(d);
     let out = camspring(d, &["identify", "clipped.csv", "--json"]);
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["transient_samples"], 0, "{}", v["transient_samples"]);
+    assert_finds_the_simulated_law(&v, &truth);
+    // So does the diagnosis: its bins end short of where the force first stood at 60 N.
+    let out = camspring(d, &["diagnose", &paper, "clipped.csv", "--json"]);
+    let g: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_diagnosis_left_out(&g, "clipped_samples", from);
+}
+
+/// The truth JSON `simulate_paper` wrote beside its log.
+fn simulated_truth(dir: &std::path::Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("calib.truth.json")).unwrap()).unwrap()
+}
+
+/// Asserts that identification's JSON `v` finds the simulated law's k2 and mu within three of
+/// their standard deviations.
+fn assert_finds_the_simulated_law(v: &serde_json::Value, truth: &serde_json::Value) {
     for name in ["k2_per_mm", "mu_n"] {
         let p = &v["parameters"];
         let z = (p[name].as_f64().unwrap() - truth["law"][name].as_f64().unwrap())
             / p[&format!("{name}_std")].as_f64().unwrap();
         assert!(z.abs() < 3.0, "{name}: z {z}");
     }
-    // So does the diagnosis: its bins end short of where the force first stood at 60 N.
-    let out = camspring(d, &["diagnose", &paper, "clipped.csv", "--json"]);
-    let g: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    assert_diagnosis_left_out(&g, "clipped_samples", from);
 }
 
 /// Asserts that the diagnosis `g` left out more than 1000 samples by its count `left_out`
@@ -1201,9 +1210,7 @@ fn a_rod_against_a_stop_is_named_and_left_out_of_the_fit() {
     let d = dir.path();
     simulate_paper(d, "5");
     let text = std::fs::read_to_string(d.join("calib.csv")).unwrap();
-    let truth: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(d.join("calib.truth.json")).unwrap())
-            .unwrap();
+    let truth = simulated_truth(d);
     let true_x: Vec<f64> = truth["position_mm"]
         .as_array()
         .unwrap()
@@ -1229,12 +1236,7 @@ fn a_rod_against_a_stop_is_named_and_left_out_of_the_fit() {
     assert_eq!(v["fit"]["status"], "fits", "{}", v["fit"]);
     // Fitted with the stop in, k2 came out 0.2734 +- 0.0018 /mm against 0.2640, and mu 15 %
     // low (until 2026-12-01).
-    for name in ["k2_per_mm", "mu_n"] {
-        let p = &v["parameters"];
-        let z = (p[name].as_f64().unwrap() - truth["law"][name].as_f64().unwrap())
-            / p[&format!("{name}_std")].as_f64().unwrap();
-        assert!(z.abs() < 3.0, "{name}: z {z}");
-    }
+    assert_finds_the_simulated_law(&v, &truth);
     let stop = &v["position_stop"];
     assert_eq!(stop["high"], true, "{stop}");
     assert!(
