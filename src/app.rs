@@ -426,9 +426,9 @@ fn force_clip_warning(c: &crate::estimate::log::ForceClip) -> String {
     format!(
         "the force stands at its {which} value, {} N, on {} samples while the position moves \
          over x = {:.3} ... {:.3} mm: {cause}; the spring's force is not measured there: \
-         identification and the diagnosis leave those readings out (and, where they hold an \
-         end of the stroke, the stroke beyond their onset), validate's coverage ends there, and \
-         the EKF, driven by the force as read, runs through them; record it with a load cell whose range covers the spring's force",
+         identification, the diagnosis and the EKF leave those readings out (and, where they \
+         hold an end of the stroke, the stroke beyond their onset), and validate's coverage \
+         ends there; record it with a load cell whose range covers the spring's force",
         c.force_n, c.samples, c.from_mm, c.to_mm
     )
 }

@@ -822,6 +822,44 @@ pub fn measured_span(
     (from, to.max(from), by)
 }
 
+/// Which samples read a force that is not the spring's, by their force and position: a
+/// reading at a clip's value, and every sample at or beyond a position where the rod's force
+/// stops being measured (a clip's onset at an end of the stroke, [`measured_span`], or a stop
+/// the rod stands against). The default measures everything.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct UnmeasuredForce {
+    /// Forces a load cell sticks at (N).
+    pub clip_values_n: Vec<f64>,
+    /// Samples at or below this position are not measured (mm).
+    pub below_mm: Option<f64>,
+    /// Samples at or above this position are not measured (mm).
+    pub above_mm: Option<f64>,
+}
+
+impl UnmeasuredForce {
+    /// Whether a sample with this force and position reads something other than the spring.
+    pub fn holds(&self, force_n: f64, position_mm: f64) -> bool {
+        self.above_mm.is_some_and(|a| position_mm >= a)
+            || self.below_mm.is_some_and(|b| position_mm <= b)
+            || self.clip_values_n.contains(&force_n)
+    }
+
+    /// Whether every sample is measured.
+    pub fn is_empty(&self) -> bool {
+        self.clip_values_n.is_empty() && self.below_mm.is_none() && self.above_mm.is_none()
+    }
+
+    /// Also leaves out the samples beyond `from_mm`: above it (`high`) or below it.
+    pub fn beyond(mut self, from_mm: f64, high: bool) -> UnmeasuredForce {
+        if high {
+            self.above_mm = Some(self.above_mm.map_or(from_mm, |a| a.min(from_mm)));
+        } else {
+            self.below_mm = Some(self.below_mm.map_or(from_mm, |b| b.max(from_mm)));
+        }
+        self
+    }
+}
+
 /// The fewest samples at a force extreme that [`ClipWatch`] calls a clip (and at least
 /// [`CLIP_MIN_SHARE`] of the log).
 pub const CLIP_MIN_SAMPLES: usize = 10;
@@ -1028,25 +1066,26 @@ impl CalibrationLog {
     /// ([`measured_span`]). There no sample is clipped below the clip's
     /// onset, so those fitted are not cut off at the load cell's top.
     pub fn unmeasured_force(&self, offset: usize, n: usize) -> Vec<bool> {
+        let rule = self.force_clip_rule();
+        (offset..offset + n)
+            .map(|i| rule.holds(self.force_n[i], self.position_mm[i]))
+            .collect()
+    }
+
+    /// The rule [`CalibrationLog::unmeasured_force`] applies to each sample, for samples read
+    /// as a stream (the EKF's passes).
+    pub fn force_clip_rule(&self) -> UnmeasuredForce {
         let clips = self.reading().force_clips;
         if clips.iter().all(Option::is_none) {
-            return vec![false; n];
+            return UnmeasuredForce::default();
         }
-        let (lo, hi) = self
-            .position_mm
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
-                (a.min(x), b.max(x))
-            });
+        let (lo, hi) = self.position_range_mm();
         let (from, to, _) = measured_span(lo, hi, &clips);
-        (offset..offset + n)
-            .map(|i| {
-                let (x, f) = (self.position_mm[i], self.force_n[i]);
-                (to < hi && x >= to)
-                    || (from > lo && x <= from)
-                    || clips.iter().flatten().any(|c| f == c.force_n)
-            })
-            .collect()
+        UnmeasuredForce {
+            clip_values_n: clips.iter().flatten().map(|c| c.force_n).collect(),
+            below_mm: (from > lo).then_some(from),
+            above_mm: (to < hi).then_some(to),
+        }
     }
 
     /// Moves the encoder zero: every position becomes x - `offset_mm`.

@@ -1276,6 +1276,18 @@ where
             }
         }
     };
+    // What the rig did not measure (a load cell at the end of its range, a rod against a
+    // stop): the filter passes over it and resumes after it ([`ekf::Filter::push_marked`]).
+    let unmeasured = {
+        let rule = reduced.log.force_clip_rule();
+        match identification
+            .as_ref()
+            .and_then(|id| id.position_stop.as_ref())
+        {
+            Some(stop) => rule.beyond(stop.from_mm, stop.high),
+            None => rule,
+        }
+    };
     // Where no delay was asked for, whether the log looks read with its force late.
     let force_delay_screen = match &identification {
         Some(id) if opts.force_delay.screened() => screen_force_delay(reduced, noise, id),
@@ -1391,34 +1403,45 @@ where
         )?;
         let mut coulomb = CoulombStage::new(init.d0_n, frictionless, sigma_top, window, noise, dt);
         let mut path = StiffnessPath::new(identification.as_ref());
-        let mut deliver =
-            |coulomb: &mut CoulombStage, filter: &mut ekf::Filter| -> Result<(), EstimateError> {
-                while let Some((j, sj)) = coulomb.out.pop_front() {
-                    if let Some(mut row) = filter.push(j, sj)? {
-                        // The parallel filter saw the force with the initial d0 taken out.
-                        row.offsets[1] += init.d0_n;
-                        if sink.row(&row).is_break() {
-                            return Err(EstimateError::Stopped);
-                        }
-                        let (k, n) = filter.progress();
-                        if 2 * k > n {
-                            path.push(&row);
-                        }
-                        if k % 65_536 == 1 {
-                            progress(k - 1, n);
-                        }
+        // The unmeasured samples on their way through the friction stage (log indices).
+        let mut unmeasured_at = VecDeque::new();
+        let mut deliver = |coulomb: &mut CoulombStage,
+                           filter: &mut ekf::Filter,
+                           unmeasured_at: &mut VecDeque<usize>|
+         -> Result<(), EstimateError> {
+            while let Some((j, sj)) = coulomb.out.pop_front() {
+                while unmeasured_at.front().is_some_and(|&u| u < j) {
+                    unmeasured_at.pop_front();
+                }
+                let measured = unmeasured_at.front() != Some(&j);
+                if let Some(mut row) = filter.push_marked(j, sj, measured)? {
+                    // The parallel filter saw the force with the initial d0 taken out.
+                    row.offsets[1] += init.d0_n;
+                    if sink.row(&row).is_break() {
+                        return Err(EstimateError::Stopped);
+                    }
+                    let (k, n) = filter.progress();
+                    if 2 * k > n {
+                        path.push(&row);
+                    }
+                    if k % 65_536 == 1 {
+                        progress(k - 1, n);
                     }
                 }
-                Ok(())
-            };
+            }
+            Ok(())
+        };
         for (i, sample) in open()?.enumerate() {
             let mut s = sample?;
             s.position_mm -= offset_mm;
+            if unmeasured.holds(s.force_n, s.position_mm) {
+                unmeasured_at.push_back(i);
+            }
             coulomb.push(i, s);
-            deliver(&mut coulomb, &mut filter)?;
+            deliver(&mut coulomb, &mut filter, &mut unmeasured_at)?;
         }
         coulomb.finish();
-        deliver(&mut coulomb, &mut filter)?;
+        deliver(&mut coulomb, &mut filter, &mut unmeasured_at)?;
         let settings = filter.settings();
         let mut run = filter.finish()?;
         run.offset_filter.theta[1] += init.d0_n;

@@ -587,6 +587,8 @@ pub fn estimate_json(est: &EstimateRun) -> Value {
         "noise": sensor_noise_json(&est.noise),
         "first_sample": run.first_sample,
         "outliers": run.outliers,
+        "passed_over_samples": run.passed_over,
+        "resumes": run.resumes,
         "held": held_states(settings),
         "imprecise": est.imprecise().iter().map(|w| json!({
             "state": w.state, "relative_std": w.relative_std,
@@ -641,6 +643,25 @@ pub fn format_consistency(est: &EstimateRun) -> String {
     }
     if let Some(r) = &est.recovery {
         let _ = writeln!(s, "note: {r}");
+    }
+    if let Some(stop) = est
+        .identification
+        .as_ref()
+        .and_then(|id| id.position_stop.as_ref())
+    {
+        let _ = writeln!(s, "warning: {}", stop.reason());
+    }
+    if est.run.passed_over > 0 {
+        let _ = writeln!(
+            s,
+            "note: the filter passed over {} samples whose force rate reaches a force that is \
+             not the spring's (a clipped load cell, a rod against a stop), and resumed {} \
+             time{} from the motion fitted to the positions past them, keeping what it had \
+             learnt of M, k2 and d2",
+            est.run.passed_over,
+            est.run.resumes,
+            if est.run.resumes == 1 { "" } else { "s" }
+        );
     }
     if let Some(u) = &est.unresolved_friction_sign {
         let _ = writeln!(
