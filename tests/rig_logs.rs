@@ -1169,6 +1169,14 @@ fn a_load_cell_at_the_top_of_its_range_is_named_with_where_it_stood() {
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(v["transient_samples"], 0, "{}", v["transient_samples"]);
     assert_finds_the_simulated_law(&v, &truth);
+    // The force noise from the log's differences leaves the clip's standstill out (counted,
+    // it made the variance 1.58e-2 against the simulated 1.70e-2 N^2, z -5).
+    let noise = &v["noise"];
+    let z = (noise["log_force_variance_n2"].as_f64().unwrap()
+        - truth["noise"]["force_variance_n2"].as_f64().unwrap())
+        / (noise["log_force_variance_n2"].as_f64().unwrap()
+            * noise["log_force_variance_relative_std"].as_f64().unwrap());
+    assert!(z.abs() < 3.0, "force variance z {z}: {noise}");
     // So does the diagnosis: its bins end short of where the force first stood at 60 N.
     let out = camspring(d, &["diagnose", &paper, "clipped.csv", "--json"]);
     let g: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();

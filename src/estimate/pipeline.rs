@@ -1020,6 +1020,7 @@ pub struct Surveyor {
     t_last: f64,
     range: (f64, f64),
     noise: LogNoiseSurvey,
+    clips: super::log::ClipWatch,
 }
 
 impl Surveyor {
@@ -1033,12 +1034,14 @@ impl Surveyor {
             t_last: f64::NAN,
             range: (f64::INFINITY, f64::NEG_INFINITY),
             noise: LogNoiseSurvey::default(),
+            clips: super::log::ClipWatch::default(),
         }
     }
 
     /// Takes the next sample.
     pub fn push(&mut self, s: Sample) {
         self.noise.push(s.force_n, s.position_mm);
+        self.clips.push(s.force_n, s.position_mm);
         match (&mut self.reduction, self.first) {
             (Some(r), _) => r.push(s),
             (None, None) => self.first = Some(s),
@@ -1065,6 +1068,13 @@ impl Surveyor {
     /// The survey of the samples taken.
     pub fn finish(self) -> LogSurvey {
         let n = self.samples;
+        let clips: Vec<f64> = self
+            .clips
+            .clips()
+            .iter()
+            .flatten()
+            .map(|c| c.force_n)
+            .collect();
         let t_first = self.first.map_or(f64::NAN, |f| f.t_s);
         let reduced = match self.reduction {
             Some(r) => r.finish(),
@@ -1085,7 +1095,7 @@ impl Surveyor {
             },
             position_range_mm: self.range,
             reduced,
-            noise: self.noise.estimate(),
+            noise: self.noise.estimate_without_force(&clips),
         }
     }
 }
