@@ -1109,7 +1109,7 @@ pub fn run_validate(
     let offset_mm = match opts.position_offset {
         PositionOffset::None => None,
         PositionOffset::Mm(c) => Some(c),
-        PositionOffset::Auto => Some(crate::estimate::pipeline::fit_offset_by_identification(
+        PositionOffset::Auto => Some(crate::estimate::pipeline::fit_offset_to_law(
             &log, &noise, &designed,
         )?),
     };

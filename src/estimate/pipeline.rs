@@ -3147,6 +3147,137 @@ pub fn fit_offset_by_identification(
     offset_from_identification(&id, designed, lo, hi)
 }
 
+/// The encoder zero of a log against a designed law of any form: for an exponential law the
+/// identified law is matched to it ([`fit_offset_by_identification`]); for a tabulated or
+/// polynomial law, which identification's exponential cannot follow, the log's samples are
+/// ([`fit_offset_on_samples`]).
+pub fn fit_offset_to_law(
+    log: &CalibrationLog,
+    noise: &SensorNoise,
+    designed: &ForceLaw,
+) -> Result<f64, IdentifyError> {
+    match designed {
+        ForceLaw::Exponential(_) => fit_offset_by_identification(log, noise, designed),
+        _ => Ok(fit_offset_on_samples(log, noise, designed)),
+    }
+}
+
+/// The most samples [`fit_offset_on_samples`] sums over (evenly strided beyond that): each
+/// shift tried costs one pass over them.
+pub const OFFSET_FIT_SAMPLES: usize = 200_000;
+
+/// The encoder zero c (mm) that best explains the log's force by the designed law at x - c
+/// plus the rod's dynamics and friction: for each c the force left after the designed spring,
+/// F - F_d(x - c), is regressed on [xdd, xd, xd^3, sgn(xd)] (the position smoothed and
+/// differentiated with the default Savitzky-Golay kernels), and c minimises what the
+/// regression leaves. The spring is taken as designed, so that every mismatch of the force
+/// curve goes to the zero, as [`fit_position_offset`] does for an identified law. On the knee
+/// spec's tabulated law, matching identification's exponential instead put a log shifted by
+/// 0.5 mm at 0.453 mm (and a true one at -0.047 mm): an exponential cannot follow the table,
+/// and the shift took up the difference. The clipped readings are left out
+/// ([`CalibrationLog::unmeasured_force`]). The shifts searched are those of
+/// [`fit_position_offset`].
+pub fn fit_offset_on_samples(
+    log: &CalibrationLog,
+    noise: &SensorNoise,
+    designed: &ForceLaw,
+) -> f64 {
+    use nalgebra::{Matrix4, Vector4};
+    let dt = log.dt_s();
+    let diff = sg::Differentiator::for_rate(1.0 / dt);
+    let x = diff.apply(&log.position_mm, dt, sg::POSITION);
+    let xd = diff.apply(&log.position_mm, dt, sg::VELOCITY);
+    let xdd = diff.apply(&log.position_mm, dt, sg::ACCELERATION);
+    let n = x.len();
+    if n == 0 {
+        return 0.0;
+    }
+    let band = 3.0
+        * diff
+            .noise_variance(sg::VELOCITY, noise.position_variance_mm2, dt)
+            .sqrt();
+    let unmeasured = log.unmeasured_force(diff.half, n);
+    let stride = n.div_ceil(OFFSET_FIT_SAMPLES).max(1);
+    // Each kept sample: position, force, and the dynamics' regressors.
+    let rows: Vec<(f64, f64, Vector4<f64>)> = (0..n)
+        .step_by(stride)
+        .filter(|&i| !unmeasured[i])
+        .map(|i| {
+            let sgn = if xd[i] > band {
+                1.0
+            } else if xd[i] < -band {
+                -1.0
+            } else {
+                0.0
+            };
+            (
+                x[i],
+                log.force_n[diff.half + i],
+                Vector4::new(xdd[i], xd[i], xd[i].powi(3), sgn),
+            )
+        })
+        .collect();
+    let mut ata = Matrix4::<f64>::zeros();
+    for (_, _, r) in &rows {
+        ata += r * r.transpose();
+    }
+    // Scaled to a unit diagonal; a regressor the log does not excite (no motion) drops out.
+    let d = Vector4::from_fn(|k, _| ata[(k, k)].sqrt());
+    let keep: Vec<usize> = (0..4).filter(|&k| d[k] > 0.0 && d[k].is_finite()).collect();
+    let scaled = nalgebra::DMatrix::from_fn(keep.len(), keep.len(), |a, b| {
+        ata[(keep[a], keep[b])] / (d[keep[a]] * d[keep[b]])
+    });
+    let inverse = scaled.clone().try_inverse();
+    let left = |c: f64| -> f64 {
+        let mut yy = 0.0;
+        let mut aty = Vector4::<f64>::zeros();
+        for (xi, fi, r) in &rows {
+            let y = fi - designed.force_n(xi - c);
+            yy += y * y;
+            aty += r * y;
+        }
+        let b = nalgebra::DVector::from_fn(keep.len(), |a, _| aty[keep[a]] / d[keep[a]]);
+        let explained = inverse
+            .as_ref()
+            .map_or(0.0, |inv| (b.transpose() * inv * &b)[(0, 0)]);
+        yy - explained
+    };
+    let (lo, hi) = x
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    minimise_shift(left, lo, hi)
+}
+
+/// The shift c (mm) minimising `cost` over the shifts [`fit_position_offset`] searches for
+/// logged deflections `lo ..= hi`: a grid, then golden-section refinement round its best point.
+fn minimise_shift(cost: impl Fn(f64) -> f64, lo: f64, hi: f64) -> f64 {
+    let span = (hi - lo).max(1e-9);
+    let half = (0.5 * span).max(2.0 * lo.abs().max(hi.abs()));
+    let steps = 400;
+    let mut best = (f64::INFINITY, 0.0);
+    for i in 0..=steps {
+        let c = -half + 2.0 * half * i as f64 / steps as f64;
+        let v = cost(c);
+        if v < best.0 {
+            best = (v, c);
+        }
+    }
+    let h = 2.0 * half / steps as f64;
+    let (mut a, mut b) = (best.1 - h, best.1 + h);
+    let g = 0.5 * (5f64.sqrt() - 1.0);
+    for _ in 0..60 {
+        let (c1, c2) = (b - g * (b - a), a + g * (b - a));
+        if cost(c1) < cost(c2) {
+            b = c2;
+        } else {
+            a = c1;
+        }
+    }
+    0.5 * (a + b)
+}
+
 /// The encoder zero that matches an identified law to a designed one over `lo ..= hi` (mm).
 fn offset_from_identification(
     id: &Identification,
@@ -3192,27 +3323,5 @@ pub fn fit_position_offset(
             .map(|&x| (measured.force_n(x) - designed.force_n(x - c)).powi(2))
             .sum()
     };
-    // A coarse grid, then golden-section refinement around its best point.
-    let half = (0.5 * span).max(2.0 * lo.abs().max(hi.abs()));
-    let steps = 400;
-    let mut best = (f64::INFINITY, 0.0);
-    for i in 0..=steps {
-        let c = -half + 2.0 * half * i as f64 / steps as f64;
-        let v = cost(c);
-        if v < best.0 {
-            best = (v, c);
-        }
-    }
-    let h = 2.0 * half / steps as f64;
-    let (mut a, mut b) = (best.1 - h, best.1 + h);
-    let g = 0.5 * (5f64.sqrt() - 1.0);
-    for _ in 0..60 {
-        let (c1, c2) = (b - g * (b - a), a + g * (b - a));
-        if cost(c1) < cost(c2) {
-            b = c2;
-        } else {
-            a = c1;
-        }
-    }
-    0.5 * (a + b)
+    minimise_shift(cost, lo, hi)
 }
