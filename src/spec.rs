@@ -17,7 +17,7 @@ use crate::model::{
     ChecksSpec, Condition, Coolant, Dialect, DrawingSpec, ExpLaw, Follower, FrictionCorrection,
     FrictionSource, Hole, LawSpec, LawTargets, MachiningSpec, Material, OutputSpec, PartSpec,
     SheetSize, Spec, SpecError, SpringArrangement, TolerancesSpec, Tool, ToolKind, WorkOffset,
-    MATERIALS,
+    MATERIALS, MAX_FRICTION,
 };
 use crate::units::{parse_quantity, quoted, Dimension, UnitError};
 
@@ -700,6 +700,22 @@ fn read(raw: &RawSpec, r: &mut Reader<'_>) -> Result<Spec, SpecError> {
     let default_tol = RawTolerances::default();
     let t = raw.tolerances.as_ref().unwrap_or(&default_tol);
     let d = TolerancesSpec::default();
+    // The band's friction range holds the design's own contact friction unless given: a
+    // pin bush's effective coefficient (the ankle spec's, 0.075) lies above the default
+    // range, and a part built exactly as designed fell outside its own band of builds (its
+    // loading stroke above, its unloading one below, by 5.7 %). Where the design's friction
+    // reaches outside the default range, the range reaches from half of it to one and a half
+    // times it.
+    let design_friction = follower.friction_coefficient();
+    let (friction_min, friction_max) = if design_friction.is_finite() && design_friction > 0.0 {
+        (
+            d.friction_min.min(0.5 * design_friction),
+            d.friction_max
+                .max((1.5 * design_friction).min(MAX_FRICTION)),
+        )
+    } else {
+        (d.friction_min, d.friction_max)
+    };
     let tolerances = TolerancesSpec {
         spring_rate_percent: r.or(
             "tolerances.spring_rate",
@@ -719,13 +735,13 @@ fn read(raw: &RawSpec, r: &mut Reader<'_>) -> Result<Spec, SpecError> {
             "tolerances.friction_min",
             &t.friction_min,
             D::Dimensionless,
-            d.friction_min,
+            friction_min,
         )?,
         friction_max: r.or(
             "tolerances.friction_max",
             &t.friction_max,
             D::Dimensionless,
-            d.friction_max,
+            friction_max,
         )?,
         samples: r.count("tolerances.samples", &t.samples, usize::MAX, d.samples),
         seed: r.count("tolerances.seed", &t.seed, u64::MAX, d.seed),

@@ -1398,6 +1398,47 @@ fn a_built_part_with_contact_friction_is_judged_conclusively_from_its_strokes() 
 }
 
 #[test]
+fn a_part_built_as_designed_lies_in_its_own_band_of_builds() {
+    // The ankle spec's roller turns on a bronze bush: an effective contact friction of 0.075,
+    // above the default band's 0.005 ... 0.05. Its band now reaches from 0.005 to 0.1125, and
+    // a part built exactly as designed passes it; it failed force_band by 5.7 %, its loading
+    // stroke above the band and its unloading one below (until 2026-12-01).
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let ankle = spec_path("ankle.toml");
+    let args = [
+        "simulate",
+        &ankle,
+        "--built",
+        "-o",
+        "built.csv",
+        "--seed",
+        "3",
+    ];
+    assert_eq!(camspring(d, &args).status.code(), Some(0));
+    let out = camspring(d, &["validate", &ankle, "built.csv", "--json"]);
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", v["criteria"]);
+    assert_eq!(common::criterion(&v, "force_band")["pass"], true);
+    assert_eq!(v["conclusive"], true, "{}", v["criteria"]);
+    // The band the design reports holds the friction: half to 1.5 times the bush's 0.075.
+    let out = camspring(d, &["design", &ankle, "-o", "part"]);
+    assert_eq!(out.status.code(), Some(0));
+    let design: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("part/design.json")).unwrap())
+            .unwrap();
+    let t = &design["spec"]["tolerances"];
+    assert!(
+        (t["friction_max"].as_f64().unwrap() - 0.1125).abs() < 1e-9,
+        "{t}"
+    );
+    assert!(
+        (t["friction_min"].as_f64().unwrap() - 0.005).abs() < 1e-12,
+        "{t}"
+    );
+}
+
+#[test]
 fn an_encoder_zero_off_on_a_tabulated_law_is_found_on_the_samples() {
     // The knee spec's law is a table, which identification's exponential cannot follow:
     // matched to that, the zero of this log shifted by 0.5 mm came out 0.453 mm, and -0.047 mm

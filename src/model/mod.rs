@@ -190,7 +190,8 @@ pub struct TolerancesSpec {
 
 impl Default for TolerancesSpec {
     /// Catalogue springs (+-10 %), shims (+-0.1 mm), a bearing's outer ring (+-0.01 mm), a
-    /// milled profile (+-0.02 mm), friction from 0.005 to 0.05, 2000 builds, seed 1.
+    /// milled profile (+-0.02 mm), friction from 0.005 to 0.05 (a spec's reading widens it to
+    /// hold the design's own friction), 2000 builds, seed 1.
     fn default() -> Self {
         TolerancesSpec {
             spring_rate_percent: 10.0,
