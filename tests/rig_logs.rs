@@ -920,6 +920,21 @@ fn simulate_paper(dir: &std::path::Path, seed: &str) {
     assert_eq!(camspring(dir, &args).status.code(), Some(0));
 }
 
+/// Writes `built.csv` (and its truth) in `dir`: a log of the spring of `spec` built as
+/// designed, its contact friction in, with noise seed `seed`.
+fn simulate_built(dir: &std::path::Path, spec: &str, seed: &str) {
+    let args = [
+        "simulate",
+        spec,
+        "--built",
+        "-o",
+        "built.csv",
+        "--seed",
+        seed,
+    ];
+    assert_eq!(camspring(dir, &args).status.code(), Some(0));
+}
+
 /// Writes `text` with every position moved by `shift_mm`, as an encoder zeroed off.
 fn shifted(text: &str, shift_mm: f64) -> String {
     mapped(text, |force, x| (force, x + shift_mm))
@@ -1342,16 +1357,7 @@ fn a_built_part_with_contact_friction_is_judged_conclusively_from_its_strokes() 
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let paper = spec_path("paper.toml");
-    let args = [
-        "simulate",
-        &paper,
-        "--built",
-        "-o",
-        "built.csv",
-        "--seed",
-        "3",
-    ];
-    assert_eq!(camspring(d, &args).status.code(), Some(0));
+    simulate_built(d, &paper, "3");
     let validate = |spec: &str| {
         let out = camspring(
             d,
@@ -1406,16 +1412,7 @@ fn a_part_built_as_designed_lies_in_its_own_band_of_builds() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let ankle = spec_path("ankle.toml");
-    let args = [
-        "simulate",
-        &ankle,
-        "--built",
-        "-o",
-        "built.csv",
-        "--seed",
-        "3",
-    ];
-    assert_eq!(camspring(d, &args).status.code(), Some(0));
+    simulate_built(d, &ankle, "3");
     let out = camspring(d, &["validate", &ankle, "built.csv", "--json"]);
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(out.status.code(), Some(0), "{}", v["criteria"]);

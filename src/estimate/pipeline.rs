@@ -3183,37 +3183,28 @@ pub fn fit_offset_on_samples(
     designed: &ForceLaw,
 ) -> f64 {
     use nalgebra::{Matrix4, Vector4};
-    let dt = log.dt_s();
-    let diff = sg::Differentiator::for_rate(1.0 / dt);
-    let x = diff.apply(&log.position_mm, dt, sg::POSITION);
-    let xd = diff.apply(&log.position_mm, dt, sg::VELOCITY);
-    let xdd = diff.apply(&log.position_mm, dt, sg::ACCELERATION);
+    let sg::DefaultMotion {
+        x,
+        xd,
+        xdd,
+        sgn,
+        half,
+    } = sg::default_motion(&log.position_mm, log.dt_s(), noise.position_variance_mm2);
     let n = x.len();
     if n == 0 {
         return 0.0;
     }
-    let band = 3.0
-        * diff
-            .noise_variance(sg::VELOCITY, noise.position_variance_mm2, dt)
-            .sqrt();
-    let unmeasured = log.unmeasured_force(diff.half, n);
+    let unmeasured = log.unmeasured_force(half, n);
     let stride = n.div_ceil(OFFSET_FIT_SAMPLES).max(1);
     // Each kept sample: position, force, and the dynamics' regressors.
     let rows: Vec<(f64, f64, Vector4<f64>)> = (0..n)
         .step_by(stride)
         .filter(|&i| !unmeasured[i])
         .map(|i| {
-            let sgn = if xd[i] > band {
-                1.0
-            } else if xd[i] < -band {
-                -1.0
-            } else {
-                0.0
-            };
             (
                 x[i],
-                log.force_n[diff.half + i],
-                Vector4::new(xdd[i], xd[i], xd[i].powi(3), sgn),
+                log.force_n[half + i],
+                Vector4::new(xdd[i], xd[i], xd[i].powi(3), sgn[i]),
             )
         })
         .collect();

@@ -199,6 +199,55 @@ pub const MOTION_VELOCITY: usize = 3;
 /// Kernel index: derivative over the whole window (force rate).
 pub const RATE: usize = 4;
 
+/// A log's position smoothed and differentiated with the default kernels for its rate
+/// ([`Differentiator::for_rate`]), and the sign of its velocity where that lies beyond three
+/// standard deviations of the velocity's noise (0 within): what the regressions on the
+/// quasi-static curve and on the encoder zero take the rod's dynamics and friction from.
+/// Sample i belongs to the log's sample `half + i`.
+#[derive(Debug, Clone)]
+pub struct DefaultMotion {
+    /// Smoothed position (mm).
+    pub x: Vec<f64>,
+    /// Velocity (mm/s).
+    pub xd: Vec<f64>,
+    /// Acceleration (mm/s^2).
+    pub xdd: Vec<f64>,
+    /// The velocity's sign beyond its noise band, else 0.
+    pub sgn: Vec<f64>,
+    /// The kernels' half window: the log's samples before the first smoothed one.
+    pub half: usize,
+}
+
+/// [`DefaultMotion`] of positions `position_mm` sampled every `dt` seconds, read with noise of
+/// variance `position_variance_mm2`.
+pub fn default_motion(position_mm: &[f64], dt: f64, position_variance_mm2: f64) -> DefaultMotion {
+    let diff = Differentiator::for_rate(1.0 / dt);
+    let xd = diff.apply(position_mm, dt, VELOCITY);
+    let band = 3.0
+        * diff
+            .noise_variance(VELOCITY, position_variance_mm2, dt)
+            .sqrt();
+    let sgn = xd
+        .iter()
+        .map(|&v| {
+            if v > band {
+                1.0
+            } else if v < -band {
+                -1.0
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    DefaultMotion {
+        x: diff.apply(position_mm, dt, POSITION),
+        xdd: diff.apply(position_mm, dt, ACCELERATION),
+        xd,
+        sgn,
+        half: diff.half,
+    }
+}
+
 /// The five kernels; see the module documentation.
 #[derive(Debug, Clone)]
 pub struct Differentiator {

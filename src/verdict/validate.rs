@@ -588,29 +588,15 @@ pub fn validate_curve(
     build_band: Option<&ForceBand>,
 ) -> CurveValidation {
     use nalgebra::{SMatrix, SVector};
-    let dt = log.dt_s();
-    let diff = sg::Differentiator::for_rate(1.0 / dt);
-    let x = diff.apply(&log.position_mm, dt, sg::POSITION);
-    let xd = diff.apply(&log.position_mm, dt, sg::VELOCITY);
-    let xdd = diff.apply(&log.position_mm, dt, sg::ACCELERATION);
+    let sg::DefaultMotion {
+        x,
+        xd,
+        xdd,
+        sgn,
+        half,
+    } = sg::default_motion(&log.position_mm, log.dt_s(), noise.position_variance_mm2);
     let n = x.len();
-    let f = &log.force_n[diff.half..diff.half + n];
-    let band = 3.0
-        * diff
-            .noise_variance(sg::VELOCITY, noise.position_variance_mm2, dt)
-            .sqrt();
-    let sgn: Vec<f64> = xd
-        .iter()
-        .map(|&v| {
-            if v > band {
-                1.0
-            } else if v < -band {
-                -1.0
-            } else {
-                0.0
-            }
-        })
-        .collect();
+    let f = &log.force_n[half..half + n];
     let design: Vec<f64> = x.iter().map(|&xi| designed.force_n(xi)).collect();
     let row =
         |i: usize| SVector::<f64, 6>::from([1.0, design[i], xdd[i], xd[i], xd[i].powi(3), sgn[i]]);
