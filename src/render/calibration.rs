@@ -897,6 +897,13 @@ pub fn format_validation(v: &Validation) -> String {
             e.loading_k2_per_mm, e.unloading_k2_per_mm, e.mean.k2_per_mm
         );
     }
+    if let Some(strokes) = &v.stroke_exponents {
+        let _ = writeln!(
+            s,
+            "  k2 judged from each stroke's curve (the diagnosis's bins): {}",
+            crate::verdict::validate::stroke_exponents_text(strokes)
+        );
+    }
     s.push_str(&band_exit_lines(&v.band_exits));
     s.push_str(&coverage_lines(v.coverage.as_ref(), v.position_offset_mm));
     if let Some(d) = &v.force_delay {

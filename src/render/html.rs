@@ -487,6 +487,19 @@ pub fn validation_html(
         v.range_max_mm,
         log = escape(log_name),
     );
+    if let (Some(strokes), Some(e)) = (&v.stroke_exponents, &v.exponents) {
+        let _ = writeln!(
+            h,
+            "<p>k2 is judged from each stroke's curve (the diagnosis's bins, the rod's dynamics \
+             taken out), which the filter's and identification's constant friction cannot \
+             follow here: {}, against the designed build's loading {:.6} and unloading {:.6} \
+             /mm.</p>",
+            escape(&crate::verdict::validate::stroke_exponents_text(strokes))
+                .replace("+-", "&plusmn;"),
+            e.loading_k2_per_mm,
+            e.unloading_k2_per_mm
+        );
+    }
     if let Some(screen) = v.force_delay_screen.as_ref().filter(|s| s.suspected) {
         let held = &screen.held;
         let late = if held.delay_s >= 0.0 {

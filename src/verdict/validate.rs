@@ -1460,6 +1460,24 @@ fn exponential_fit(points: &[(f64, f64)], k2_start: f64) -> Option<ExpLaw> {
     })
 }
 
+/// "loading 0.264549 +- 0.000671, unloading ... /mm": the strokes' exponents where they
+/// judged k2 ([`stroke_exponents`]), for the text and the page.
+pub fn stroke_exponents_text(strokes: &[StrokeExponent]) -> String {
+    strokes
+        .iter()
+        .map(|s| {
+            format!(
+                "{} {:.6} +- {:.6}",
+                if s.loading { "loading" } else { "unloading" },
+                s.k2_per_mm,
+                s.k2_std_per_mm
+            )
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
+        + " /mm"
+}
+
 /// The exponent of one stroke's quasi-static force curve, fitted to the diagnosis's bins
 /// ([`stroke_exponents`]).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
