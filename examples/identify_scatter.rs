@@ -47,9 +47,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             law.mu_n,
             law.f0_n,
             law.k2_per_mm,
+            0.0,
         ];
-        let mut z: Vec<Vec<f64>> = vec![Vec::new(); 7];
-        let mut missing = [0usize; 7];
+        let mut z: Vec<Vec<f64>> = vec![Vec::new(); 8];
+        let mut missing = [0usize; 8];
         let (mut worst_k2, mut worst_mu) = (0.0f64, 0.0f64);
         for seed in 0..seeds {
             let settings = SimSettings {

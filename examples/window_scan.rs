@@ -52,6 +52,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         law.mu_n,
         law.f0_n,
         law.k2_per_mm,
+        0.0,
     ];
     let noise = if std::env::var("NOISEFREE").is_ok() {
         SensorNoise::new(1e-14, 1e-14)

@@ -1350,10 +1350,12 @@ fn a_rod_against_a_stop_is_named_and_left_out_of_the_fit() {
 #[test]
 fn a_built_part_with_contact_friction_is_judged_conclusively_from_its_strokes() {
     // The paper spec built as designed, its contact friction in (the loading stroke follows
-    // the law; the unloading one lies a share of the force below it). Identification's and
-    // the EKF's friction is constant, and on this log their k2 could have been 9 % off: the
+    // the law; the unloading one lies a share of the force below it). With identification's
+    // and the EKF's friction constant, their k2 could have been 9 % off on this log: the
     // verdict was "PASS, NOT CONCLUSIVE" (until 2026-12-01). Each stroke's exponent, fitted to
-    // the diagnosis's bins, judges it.
+    // the diagnosis's bins, judged it then; since their friction grows with the load too
+    // (2026-12-02), the filter's k2 judges it where it is consistent, and the strokes where
+    // neither resolves it.
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let paper = spec_path("paper.toml");
@@ -1370,12 +1372,24 @@ fn a_built_part_with_contact_friction_is_judged_conclusively_from_its_strokes() 
     assert_eq!(code, Some(0), "{}", v["criteria"]);
     assert_eq!(v["conclusive"], true, "{}", v["criteria"]);
     let k2 = common::criterion(&v, "k2");
-    assert!(k2["what"].as_str().unwrap().contains("each stroke"), "{k2}");
-    // Each stroke's exponent within three of its standard deviations of the designed
-    // build's exponent of that stroke.
-    let strokes = v["stroke_exponents"].as_array().unwrap();
-    assert_eq!(strokes.len(), 2, "{strokes:?}");
-    for s in strokes {
+    assert!(
+        k2["deviation_upper_percent"].as_f64().unwrap() < 1.0,
+        "{k2}"
+    );
+    // Where the strokes judged k2, each one's exponent within three of its standard
+    // deviations of the designed build's exponent of that stroke.
+    let strokes = match v["stroke_exponents"].as_array() {
+        Some(strokes) => {
+            assert!(k2["what"].as_str().unwrap().contains("each stroke"), "{k2}");
+            assert_eq!(strokes.len(), 2, "{strokes:?}");
+            strokes.clone()
+        }
+        None => {
+            assert!(k2["what"].as_str().unwrap().contains("EKF"), "{k2}");
+            Vec::new()
+        }
+    };
+    for s in &strokes {
         let designed = if s["loading"] == true {
             &v["exponents"]["loading_k2_per_mm"]
         } else {
@@ -1857,4 +1871,69 @@ fn estimate_from_the_designed_law_says_when_nothing_checks_it() {
         reasons.contains("identification does not fit this log") && reasons.contains("excite"),
         "{reasons}"
     );
+}
+
+#[test]
+fn a_cams_friction_that_grows_with_the_load_is_identified_and_taken_out_of_the_filter() {
+    // A cam's contact friction pushes with the roller's load: a built part's loading and
+    // unloading strokes are two curves apart by a share of the force. With friction modelled
+    // as a constant, identification hid the misfit by choosing its shortest window, dropped m
+    // (the paper spec: k2 0.2685 +- 0.0016 against the strokes' 0.2640 and 0.2652; the ankle:
+    // residual RMS 15.7 N) and the EKF's innovations were 11 times their variance on the
+    // ankle (until 2026-12-02). The truth here is the design's forward model: the built
+    // strokes' curves, which the simulator ran.
+    use camspring::verdict::diagnose::{built_spring, AsBuilt};
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // The simulator's transmission behind the cam: m 0.05 N s^2/mm, d1 0.2 N s/mm.
+    let (m_true, d1_true) = (0.05, 0.2);
+    for (name, span) in [("paper.toml", (6.0, 15.0)), ("ankle.toml", (3.0, 10.0))] {
+        let path = spec_path(name);
+        simulate_built(d, &path, "3");
+        let spec = camspring::app::load_spec(Some(std::path::Path::new(&path))).unwrap();
+        let design = camspring::design::design_with(&spec, false).unwrap();
+        let spring = built_spring(&design, &AsBuilt::assembled(&spec)).unwrap();
+        let out = camspring(d, &["identify", "built.csv", "--json"]);
+        let id: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(out.status.code(), Some(0), "{name}: {}", id["fit"]);
+        let p = &id["parameters"];
+        let value = |k: &str| p[k].as_f64().unwrap_or_else(|| panic!("{name}: {k} {p}"));
+        let std = |k: &str| p[format!("{k}_std")].as_f64().unwrap();
+        let z = |k: &str, truth: f64| (value(k) - truth) / std(k);
+        assert!(z("m_n_s2_per_mm", m_true).abs() < 3.0, "{name}: {p}");
+        assert!(z("d1_n_s_per_mm", d1_true).abs() < 3.0, "{name}: {p}");
+        assert!(value("mu_f_n") > 10.0 * std("mu_f_n"), "{name}: {p}");
+        // Half the gap between the strokes is the friction, their mean the spring: within 3 %
+        // of the half gap and 0.5 % of the force over the span logged most.
+        let (d0, mu_f, mu, f0, k2) = (
+            value("d0_n"),
+            value("mu_f_n"),
+            value("mu_n"),
+            value("f0_n"),
+            value("k2_per_mm"),
+        );
+        for i in 0..=8 {
+            let x = span.0 + (span.1 - span.0) * i as f64 / 8.0;
+            let (up, down) = (spring.loading.force_n(x), spring.unloading.force_n(x));
+            let e = (k2 * x).exp();
+            let (gap, friction) = (0.5 * (up - down), d0 + mu_f * e);
+            assert!(
+                (friction / gap - 1.0).abs() < 0.03,
+                "{name} at {x:.2} mm: friction {friction:.4} N against the strokes' half gap {gap:.4} N"
+            );
+            let (mean, spring_force) = (0.5 * (up + down), mu * e + f0);
+            assert!(
+                (spring_force / mean - 1.0).abs() < 0.005,
+                "{name} at {x:.2} mm: spring {spring_force:.4} N against the strokes' mean {mean:.4} N"
+            );
+        }
+        // The filter, its force cleaned of that friction, is consistent and finds m.
+        let out = camspring(d, &["estimate", "built.csv", "--json", "-o", "est.csv"]);
+        let run: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(out.status.code(), Some(0), "{name}: {}", run["consistency"]);
+        let f = &run["final"];
+        let m = f["m_n_s2_per_mm"].as_f64().unwrap();
+        let m_std = f["m_n_s2_per_mm_std"].as_f64().unwrap();
+        assert!(((m - m_true) / m_std).abs() < 3.0, "{name}: {f}");
+    }
 }

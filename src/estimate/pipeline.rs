@@ -12,8 +12,8 @@ use std::ops::ControlFlow;
 
 use super::ekf::{self, EkfError, EkfInit, EkfRow, EkfRun, EkfSettings};
 use super::identify::{
-    block_for_interval, identify_reduced, Identification, IdentifyError, ReducedLog, Reduction,
-    SensorNoise, MAX_IDENTIFY_SAMPLES,
+    block_for_interval, identify_reduced, identify_reduced_with, Identification, IdentifyError,
+    ReducedLog, Reduction, SensorNoise, MAX_IDENTIFY_SAMPLES,
 };
 use super::log::{CalibrationLog, LogError, Sample};
 use super::noise::{GivenNoise, LogNoise, LogNoiseSurvey, ResolvedNoise};
@@ -420,9 +420,12 @@ impl From<LogError> for EstimateError {
 }
 
 /// The transmission without its friction, as identification gives it: what the force should
-/// be at each sample apart from d0 sgn(xd).
+/// be at each sample apart from (d0 + mu_f exp(k2 x)) sgn(xd); with the part of that friction
+/// that grows with the spring (`mu_f_n`), which the friction stage adds to d0.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FrictionlessModel {
+    /// The friction that grows with the spring's force, mu_f exp(k2 x) (N at exp(k2 x) = 1).
+    pub mu_f_n: f64,
     /// Inertia m (N s^2/mm).
     pub m_n_s2_per_mm: f64,
     /// Linear damping d1 (N s/mm).
@@ -707,8 +710,18 @@ impl CoulombStage {
         }
     }
 
+    /// The sliding friction's magnitude at deflection `x` (mm): d0 and the part that grows with
+    /// the spring, mu_f exp(k2 x).
+    fn friction_at(&self, x: f64) -> f64 {
+        self.d0
+            + self
+                .model
+                .map_or(0.0, |m| m.mu_f_n * (m.law.k2_per_mm * x).exp())
+    }
+
     fn push(&mut self, i: usize, s: Sample) {
-        if self.d0 == 0.0 || self.model.is_none() {
+        let frictionless = self.d0 == 0.0 && self.model.is_none_or(|m| m.mu_f_n == 0.0);
+        if frictionless || self.model.is_none() {
             self.out.push_back((i, s));
             return;
         }
@@ -808,6 +821,7 @@ impl CoulombStage {
             None => 0.0,
             Some(model) => {
                 let [x, v, a] = motion;
+                let d0 = self.friction_at(x);
                 let friction = s.force_n - model.force_n(x, v, a);
                 // Moving: the most probable sign given what is left of the force, with the
                 // velocity as the prior: the spring most likely slides that way, or has
@@ -827,18 +841,18 @@ impl CoulombStage {
                 };
                 let var = 2.0 * self.predicted_std.powi(2).max(1e-12);
                 let score = |&(sign, prior): &(f64, f64)| {
-                    (friction - self.d0 * sign).powi(2) / var - f64::ln(prior)
+                    (friction - d0 * sign).powi(2) / var - f64::ln(prior)
                 };
                 let (sliding, sliding_score) = candidates
                     .iter()
-                    .map(|c| (self.d0 * c.0, score(c)))
+                    .map(|c| (d0 * c.0, score(c)))
                     .min_by(|p, q| p.1.total_cmp(&q.1))
-                    .unwrap_or((self.d0 * direction, 0.0));
+                    .unwrap_or((d0 * direction, 0.0));
                 if static_possible {
                     // The rod may still stand as its move begins: static friction anywhere in
                     // +-d0 (uniform) against the likeliest sign (normal, its normalisation
                     // added, as the other candidates share it).
-                    let d0 = self.d0.abs();
+                    let d0 = d0.abs();
                     let held = s.force_n - model.force_n(x, 0.0, 0.0);
                     let excess = (held.abs() - d0).max(0.0);
                     let stuck_score = (2.0 * d0).ln() + excess * excess / var;
@@ -914,7 +928,7 @@ impl CoulombStage {
         how: Rest,
         next: Option<f64>,
     ) {
-        let d0 = self.d0.abs();
+        let d0 = self.friction_at(x).abs();
         let friction_n = match self.model {
             None => 0.0,
             Some(model) => match how {
@@ -1385,6 +1399,7 @@ where
         use super::identify::Param;
         let v = |p: Param| id.get(p).value.unwrap_or(0.0);
         FrictionlessModel {
+            mu_f_n: v(Param::MuF),
             m_n_s2_per_mm: v(Param::M),
             d1_n_s_per_mm: v(Param::D1),
             d2_n_s3_per_mm3: v(Param::D2),
@@ -1835,6 +1850,7 @@ where
     let truth = TwinTruth {
         m_n_s2_per_mm: init.m_n_s2_per_mm.0,
         d0_n: init.d0_n,
+        mu_f_n: setup.model.mu_f_n,
         d1_n_s_per_mm: init.d1_n_s_per_mm.0,
         d2_n_s3_per_mm3: init.d2_n_s3_per_mm3.0,
         law: ExpLaw {
@@ -1893,7 +1909,13 @@ where
             while let Some((_, t)) = source.out.pop_front() {
                 surveyor.push(t);
             }
-            identify_reduced(&surveyor.finish().reduced, setup.noise, Some(window_s)).ok()
+            identify_reduced_with(
+                &surveyor.finish().reduced,
+                setup.noise,
+                Some(window_s),
+                id.load_friction(),
+            )
+            .ok()
         })
         .collect();
     let truth_of_param = |p: Param| match p {
@@ -1904,6 +1926,7 @@ where
         Param::Mu => truth.law.mu_n,
         Param::F0 => truth.law.f0_n,
         Param::K2 => truth.law.k2_per_mm,
+        Param::MuF => truth.mu_f_n,
     };
     struct Twin {
         source: TwinSource,
@@ -1937,6 +1960,7 @@ where
             start.d2_n_s3_per_mm3.0 += de(Param::D2);
         }
         let model = FrictionlessModel {
+            mu_f_n: setup.model.mu_f_n + de(Param::MuF),
             m_n_s2_per_mm: setup.model.m_n_s2_per_mm + de(Param::M),
             d1_n_s_per_mm: setup.model.d1_n_s_per_mm + de(Param::D1),
             d2_n_s3_per_mm3: setup.model.d2_n_s3_per_mm3 + de(Param::D2),
@@ -2592,6 +2616,7 @@ mod tests {
     /// A frictionless model with no cubic damping.
     fn frictionless(law: crate::model::ExpLaw, m: f64, d1: f64) -> FrictionlessModel {
         FrictionlessModel {
+            mu_f_n: 0.0,
             m_n_s2_per_mm: m,
             d1_n_s_per_mm: d1,
             d2_n_s3_per_mm3: 0.0,
@@ -2702,6 +2727,7 @@ mod tests {
             settings.noise.position_variance_mm2,
         );
         let model = FrictionlessModel {
+            mu_f_n: 0.0,
             m_n_s2_per_mm: settings.dynamics.m_n_s2_per_mm,
             d1_n_s_per_mm: settings.dynamics.d1_n_s_per_mm,
             d2_n_s3_per_mm3: settings.dynamics.d2_n_s3_per_mm3,
@@ -2766,6 +2792,7 @@ mod tests {
             f0_n: 30.0,
         };
         let model = FrictionlessModel {
+            mu_f_n: 0.0,
             m_n_s2_per_mm: 0.39,
             d1_n_s_per_mm: 1.84,
             d2_n_s3_per_mm3: 0.0,

@@ -16,7 +16,10 @@ use std::collections::VecDeque;
 
 use serde::Serialize;
 
-use super::identify::{identify_reduced, Identification, IdentifyError, ReducedLog, SensorNoise};
+use super::identify::{
+    identify_reduced, identify_reduced_with, Identification, IdentifyError, LoadFriction,
+    ReducedLog, SensorNoise,
+};
 use super::log::{CalibrationLog, LogError, Sample};
 use super::window::WINDOW_RATIO;
 
@@ -207,17 +210,27 @@ struct DelayProfile<'a> {
     noise: &'a SensorNoise,
     dt: f64,
     window: f64,
+    /// The model every delay is fitted with: the log's own identification's, so that the
+    /// delays are compared on one model (decided again at each delay, the friction that grows
+    /// with the load would take up part of the delay where it helps and not elsewhere).
+    load_friction: LoadFriction,
     /// The rows tried, in the order tried (None where identification failed).
     tried: Vec<(i64, Option<RowFit>)>,
 }
 
 impl<'a> DelayProfile<'a> {
-    fn new(reduced: &'a ReducedLog, noise: &'a SensorNoise, window: f64) -> DelayProfile<'a> {
+    fn new(
+        reduced: &'a ReducedLog,
+        noise: &'a SensorNoise,
+        window: f64,
+        load_friction: LoadFriction,
+    ) -> DelayProfile<'a> {
         DelayProfile {
             reduced,
             noise,
             dt: reduced.log.dt_s(),
             window,
+            load_friction,
             tried: Vec::new(),
         }
     }
@@ -227,11 +240,12 @@ impl<'a> DelayProfile<'a> {
     fn scan(&mut self, rows: Vec<i64>) -> (i64, f64) {
         use rayon::prelude::*;
         let (reduced, noise, dt, window) = (self.reduced, self.noise, self.dt, self.window);
+        let load_friction = self.load_friction;
         let found: Vec<(i64, Option<RowFit>)> = rows
             .into_par_iter()
             .map(|d| {
                 let (log, timed) = retime_reduced(reduced, noise, d as f64 * dt);
-                let fit = identify_reduced(&log, &timed, Some(window))
+                let fit = identify_reduced_with(&log, &timed, Some(window), load_friction)
                     .ok()
                     .filter(|id| id.reduced_chi2.is_finite())
                     .map(|id| RowFit {
@@ -366,6 +380,7 @@ pub fn fit_force_delay(
     let reduced = &*profiled;
     let dt = reduced.log.dt_s();
     let first = identify_reduced(reduced, noise, window_s)?;
+    let load_friction = first.load_friction();
     let mut window = window_s.unwrap_or(first.sg_window_s);
     let (limit, min_rows) = profile_extent(window, dt);
     if (reduced.log.len() as f64) < min_rows {
@@ -377,21 +392,21 @@ pub fn fit_force_delay(
     let beyond = || IdentifyError::ForceDelayBeyondSearch {
         limit_s: limit as f64 * dt,
     };
-    let mut profile = DelayProfile::new(reduced, noise, window);
+    let mut profile = DelayProfile::new(reduced, noise, window, load_friction);
     let (mut best, least) = profile.scan((-limit..=limit).collect());
     if !least.is_finite() {
         // No delay gives a fit: identification's own error says why.
-        identify_reduced(reduced, noise, Some(window))?;
+        identify_reduced_with(reduced, noise, Some(window), load_friction)?;
     }
     if best.abs() >= limit {
         return Err(beyond());
     }
     if window_s.is_none() && best != 0 {
         let (log, timed) = retime_reduced(reduced, noise, best as f64 * dt);
-        let chosen = identify_reduced(&log, &timed, None)?.sg_window_s;
+        let chosen = identify_reduced_with(&log, &timed, None, load_friction)?.sg_window_s;
         if (chosen - window).abs() > 0.5 * dt {
             window = chosen;
-            profile = DelayProfile::new(reduced, noise, window);
+            profile = DelayProfile::new(reduced, noise, window, load_friction);
             let mut around = best;
             loop {
                 let (b, _) = profile.scan((around - 2..=around + 2).collect());
@@ -413,7 +428,7 @@ pub fn fit_force_delay(
         .latest(best)
         .and_then(|at| vertex_std_rows(&fit, at))
         .ok_or(undetermined)?;
-    let spread_rows = window_spread_rows(reduced, noise, window, best, rows, limit);
+    let spread_rows = window_spread_rows(reduced, noise, window, best, rows, limit, load_friction);
     let std_rows = std_rows.hypot(spread_rows.unwrap_or(0.0));
     if std_rows * dt > UNDETERMINED_STD_S {
         return Err(IdentifyError::ForceDelayUndetermined { window_s: window });
@@ -440,9 +455,10 @@ fn window_spread_rows(
     best: i64,
     rows: f64,
     limit: i64,
+    load_friction: LoadFriction,
 ) -> Option<f64> {
-    let (_, _, at) =
-        DelayProfile::new(reduced, noise, window * WINDOW_RATIO).least_near(best, limit)?;
+    let (_, _, at) = DelayProfile::new(reduced, noise, window * WINDOW_RATIO, load_friction)
+        .least_near(best, limit)?;
     Some(0.5 * (at - rows).abs())
 }
 
@@ -538,9 +554,10 @@ pub fn screen_force_delay(
 ) -> Option<ForceDelayScreen> {
     let profiled = profiled_rows(reduced);
     let reduced = &*profiled;
-    let held = screen_at(reduced, noise, id.sg_window_s)?;
+    let model = id.load_friction();
+    let held = screen_at(reduced, noise, id.sg_window_s, model)?;
     let longer_window = if held.significant {
-        screen_at(reduced, noise, id.sg_window_s * WINDOW_RATIO)
+        screen_at(reduced, noise, id.sg_window_s * WINDOW_RATIO, model)
     } else {
         None
     };
@@ -557,13 +574,18 @@ pub fn screen_force_delay(
 }
 
 /// The least of the delay profile at `window` ([`screen_force_delay`], step 1).
-fn screen_at(reduced: &ReducedLog, noise: &SensorNoise, window: f64) -> Option<ScreenedDelay> {
+fn screen_at(
+    reduced: &ReducedLog,
+    noise: &SensorNoise,
+    window: f64,
+    load_friction: LoadFriction,
+) -> Option<ScreenedDelay> {
     let dt = reduced.log.dt_s();
     let (limit, min_rows) = profile_extent(window, dt);
     if !dt.is_finite() || dt <= 0.0 || (reduced.log.len() as f64) < min_rows {
         return None;
     }
-    let mut profile = DelayProfile::new(reduced, noise, window);
+    let mut profile = DelayProfile::new(reduced, noise, window, load_friction);
     let (best, fit, rows) = profile.least_near(0, limit)?;
     let std_rows = vertex_std_rows(&fit, profile.latest(best)?)?;
     let beyond = fit.vertex.abs() > LOCAL_ROWS as f64;
@@ -617,7 +639,7 @@ pub fn carry_delay_uncertainty(
     };
     let at = |delay_s: f64| {
         let (log, timed) = retime_reduced(reduced, noise, delay_s);
-        identify_reduced(&log, &timed, Some(id.sg_window_s)).ok()
+        identify_reduced_with(&log, &timed, Some(id.sg_window_s), id.load_friction()).ok()
     };
     let (Some(plus), Some(minus)) = (at(fit.delay_s + std), at(fit.delay_s - std)) else {
         return;
@@ -668,8 +690,8 @@ pub fn correlation_inflation(id: &super::identify::Identification) -> f64 {
     let Some(i) = names.iter().position(|n| n == Param::D1.key()) else {
         return 1.0;
     };
-    // The paper's covariance is over X = [m, d0, d1, d2, mu, F0] (every parameter but k2, in
-    // model order), the identifiable ones.
+    // The paper's covariance is over X = [m, d0, d1, d2, mu, F0] and mu_f (every parameter
+    // but k2, in model order), the identifiable ones; D1 comes before mu_f.
     let x = &Param::ALL[..Param::K2.index()];
     let Some(j) = x
         .iter()

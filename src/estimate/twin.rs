@@ -52,6 +52,8 @@ pub struct TwinTruth {
     pub m_n_s2_per_mm: f64,
     /// Coulomb friction (N).
     pub d0_n: f64,
+    /// The friction that grows with the spring: mu_f exp(k2 x) in the sliding direction (N).
+    pub mu_f_n: f64,
     /// Linear damping (N s/mm).
     pub d1_n_s_per_mm: f64,
     /// Cubic damping (N s^3/mm^3).
@@ -306,7 +308,7 @@ impl TwinSource {
         let force = t.m_n_s2_per_mm * a
             + t.d1_n_s_per_mm * v
             + t.d2_n_s3_per_mm3 * v * v * v
-            + t.d0_n * sign
+            + (t.d0_n + t.mu_f_n * (t.law.k2_per_mm * x).exp()) * sign
             + t.law.force_n(x);
         let force_noise: f64 = StandardNormal.sample(&mut self.rng);
         let position_noise: f64 = StandardNormal.sample(&mut self.rng);
@@ -517,6 +519,7 @@ mod tests {
         TwinTruth {
             m_n_s2_per_mm: d.m_n_s2_per_mm,
             d0_n: d.d0_n,
+            mu_f_n: 0.0,
             d1_n_s_per_mm: d.d1_n_s_per_mm,
             d2_n_s3_per_mm3: d.d2_n_s3_per_mm3,
             law,

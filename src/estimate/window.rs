@@ -7,8 +7,8 @@ use serde::Serialize;
 
 use super::adequacy::FitStatus;
 use super::identify::{
-    fit, fit_model, quantisation_shares, Estimates, Identification, IdentifyError, Inertia, Param,
-    SensorNoise,
+    fit, fit_model, quantisation_shares, Estimates, Identification, IdentifyError, Inertia,
+    LoadFriction, Param, SensorNoise,
 };
 use super::log::CalibrationLog;
 use super::quantisation::Quantisation;
@@ -164,17 +164,23 @@ pub fn candidate_windows(n: usize, dt: f64) -> Vec<usize> {
 pub fn choose_window(
     log: &CalibrationLog,
     noise: &SensorNoise,
+    load_friction: LoadFriction,
 ) -> Result<Identification, IdentifyError> {
     let dt = log.dt_s();
     let windows = candidate_windows(log.len(), dt);
     if windows.is_empty() {
         // Too short a log for the shortest window: the fixed-window fit says why.
-        return fit(log, noise, &Differentiator::new(sg::MIN_WINDOW));
+        return fit(
+            log,
+            noise,
+            &Differentiator::new(sg::MIN_WINDOW),
+            load_friction,
+        );
     }
     // The fits are independent: one per core.
     let fits: Vec<Result<Identification, IdentifyError>> = windows
         .par_iter()
-        .map(|&w| fit_with_noise_uncertainty(log, noise, &Differentiator::new(w)))
+        .map(|&w| fit_with_noise_uncertainty(log, noise, &Differentiator::new(w), load_friction))
         .collect();
     // The windows compared are chosen in three steps, each among the windows the one before
     // left:
@@ -203,7 +209,7 @@ pub fn choose_window(
     // The fit at window i without m, taken where it explains the log.
     let without_m = |i: usize| {
         let diff = Differentiator::new(windows[i]);
-        fit_inertia_with_noise_uncertainty(log, noise, &diff, Inertia::LeftOut)
+        fit_inertia_with_noise_uncertainty(log, noise, &diff, Inertia::LeftOut, load_friction)
     };
     let mut fits = fits;
     let give_up_m = |fits: &mut [Result<Identification, IdentifyError>], i, refit| {
@@ -242,10 +248,14 @@ pub fn choose_window(
         .min();
     let Some(fewest_missing) = fewest_missing else {
         // Every window failed: report the failure at the shortest one.
-        return fits
-            .into_iter()
-            .next()
-            .unwrap_or_else(|| fit(log, noise, &Differentiator::new(sg::MIN_WINDOW)));
+        return fits.into_iter().next().unwrap_or_else(|| {
+            fit(
+                log,
+                noise,
+                &Differentiator::new(sg::MIN_WINDOW),
+                load_friction,
+            )
+        });
     };
     let most_moving = ok()
         .filter(|id| resolved(id) && id.not_identifiable.len() == fewest_missing)
@@ -459,8 +469,9 @@ pub fn fit_with_noise_uncertainty(
     log: &CalibrationLog,
     noise: &SensorNoise,
     diff: &Differentiator,
+    load_friction: LoadFriction,
 ) -> Result<Identification, IdentifyError> {
-    fit_inertia_with_noise_uncertainty(log, noise, diff, Inertia::Fitted)
+    fit_inertia_with_noise_uncertainty(log, noise, diff, Inertia::Fitted, load_friction)
 }
 
 /// [`fit_with_noise_uncertainty`] with or without the inertia.
@@ -469,6 +480,7 @@ fn fit_inertia_with_noise_uncertainty(
     noise: &SensorNoise,
     diff: &Differentiator,
     inertia: Inertia,
+    load_friction: LoadFriction,
 ) -> Result<Identification, IdentifyError> {
     // A quantised position's kernel shares depend on the window and the log alone: worked
     // out once for every fit at this window.
@@ -486,11 +498,13 @@ fn fit_inertia_with_noise_uncertainty(
         }
         _ => noise,
     };
-    let mut id = fit_model(log, noise, diff, inertia)?;
+    let mut id = fit_model(log, noise, diff, inertia, load_friction)?;
     let rel = noise.position_variance_relative_std;
     if rel > NOISE_UNCERTAINTY_MIN {
         let raised = noise.position_scaled(1.0 + rel);
-        if let Ok(other) = fit_model(log, &raised, diff, inertia) {
+        // The same model as the fit's: the friction that grows with the load is in both or
+        // in neither.
+        if let Ok(other) = fit_model(log, &raised, diff, inertia, id.load_friction()) {
             add_noise_uncertainty(&mut id, &other.parameters);
             id.reduced_chi2_noise_change = other.reduced_chi2 - id.reduced_chi2;
         }

@@ -8,7 +8,7 @@ use serde_json::{json, Map, Value};
 use super::plot::{self, Panel, Series};
 use crate::estimate::ekf::{idx, EkfRow, EkfRun, EkfSettings, STATE_NAMES};
 use crate::estimate::identify::{
-    Identification, Param, Regression, WindowMethod, TRANSIENT_SIGMAS,
+    Identification, Param, Regression, WindowMethod, LOAD_FRICTION_SIGMAS, TRANSIENT_SIGMAS,
 };
 use crate::estimate::noise::{NoiseModel, NoiseOrigin, ResolvedNoise};
 use crate::estimate::pipeline::EstimateRun;
@@ -187,6 +187,7 @@ pub fn identification_json(
         "regression": id.regression,
         "sign_fault": id.sign_fault,
         "position_stop": id.position_stop,
+        "load_friction_left_out_n": id.load_friction_left_out,
         "fit": {
             "status": id.adequacy.status,
             "reduced_chi2": id.adequacy.reduced_chi2,
@@ -353,6 +354,49 @@ pub fn force_delay_screen_line(screen: &ForceDelayScreen) -> String {
     )
 }
 
+/// What the friction that grows with the spring's force (mu_f) is, as a share of the spring's
+/// exponential part, where identification fitted it and it is clear of zero (beyond two of
+/// its standard deviations).
+fn load_friction_line(id: &Identification) -> Option<String> {
+    let muf = id.get(Param::MuF);
+    let (v, sd) = (muf.value?, muf.std?);
+    let mu = id.get(Param::Mu).value?;
+    (v.abs() > 2.0 * sd && mu > 0.0).then(|| {
+        format!(
+            "  friction grows with the load: muf exp(k2 x) in the sliding direction, {:.2} % of \
+             the spring's exponential part mu exp(k2 x) (a cam's contact friction): the loading \
+             stroke's exponential part is (mu + muf) exp(k2 x), the unloading stroke's \
+             (mu - muf) exp(k2 x)\n",
+            100.0 * v / mu,
+        )
+    })
+}
+
+/// Why the friction that grows with the load is not in an identification's model: left out
+/// by the rule of [`LOAD_FRICTION_SIGMAS`] (with what the fit with it gave, and where that was
+/// negative beyond the rule's standard deviations, what a negative one points to), or never
+/// fitted.
+fn load_friction_left_out(id: &Identification) -> String {
+    let Some(e) = id.load_friction_left_out else {
+        return "not in the model (the paper's constant friction d0 alone)".to_owned();
+    };
+    let mut line = format!(
+        "left out, the paper's constant friction d0 fitted instead (fitted, muf came to {}, not \
+         above zero by {LOAD_FRICTION_SIGMAS} of its standard deviations)",
+        e.describe("N")
+    );
+    if let (Some(v), Some(sd)) = (e.value, e.std) {
+        if v < -LOAD_FRICTION_SIGMAS * sd {
+            line.push_str(
+                "; a negative muf puts the loading stroke below the unloading one, which no \
+                 friction does: a force read late (or a position read early) looks like that \
+                 on a steady motion, and --force-delay auto fits such a delay",
+            );
+        }
+    }
+    line
+}
+
 /// The text summary of `camspring identify`.
 pub fn format_identification(
     id: &Identification,
@@ -368,6 +412,7 @@ pub fn format_identification(
         ("mu", "N"),
         ("F0", "N"),
         ("k2", "1/mm"),
+        ("muf", "N"),
     ];
     let mut s = String::new();
     let chosen = match id.window_choice.method {
@@ -414,24 +459,30 @@ pub fn format_identification(
                 value: Some(v),
                 std: Some(sd),
             } => {
-                // d0 (a friction step) may be small against its std without harm.
-                let note = if sd > v.abs() && p != Param::D0 {
+                // d0 and mu_f (friction) may be small against their std without harm.
+                let note = if sd > v.abs() && p != Param::D0 && p != Param::MuF {
                     "  (std exceeds the value: poorly resolved by this log)"
                 } else {
                     ""
                 };
                 let _ = writeln!(s, "  {sym:<3} = {v:>12.5e} +- {sd:.2e} {unit}{note}");
             }
+            _ if p == Param::MuF && !id.not_identifiable.iter().any(|n| n == p.key()) => {
+                let _ = writeln!(s, "  {sym:<3} = {}", load_friction_left_out(id));
+            }
             _ => {
                 let _ = writeln!(s, "  {sym:<3} = not identifiable from this log");
             }
         }
     }
+    if let Some(line) = load_friction_line(id) {
+        s.push_str(&line);
+    }
     if !id.not_identifiable.is_empty() {
         let _ = writeln!(
             s,
             "warning: not identifiable (poor excitation): {}. Record a run that moves faster and \
-             reverses (for m, d0, d1, d2) or covers more of the stroke (for mu, F0, k2); for m on a \
+             reverses (for m, d0, d1, d2, mu_f) or covers more of the stroke (for mu, F0, k2); for m on a \
              slow run, a longer filter (--window 0.8s) lowers the acceleration noise. The \
              parameters left in the model absorb the removed ones (F0 takes d0 when the motion \
              never reverses).",

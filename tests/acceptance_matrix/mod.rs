@@ -357,7 +357,7 @@ fn record_identification(o: &mut Outcome, id: &Identification, law: &ExpLaw, cas
     }
     for (p, e) in id.parameters.iter() {
         if let (Some(v), Some(s)) = (e.value, e.std) {
-            let z = ((v - truth[p.index()]) / s).abs();
+            let z = ((v - truth.get(p.index()).copied().unwrap_or(0.0)) / s).abs();
             if z > o.worst_z.0 {
                 o.worst_z = (z, &p.key()[..p.key().find('_').unwrap_or(2)]);
             }
