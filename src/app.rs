@@ -1110,7 +1110,10 @@ pub fn run_validate(
         PositionOffset::None => None,
         PositionOffset::Mm(c) => Some(c),
         PositionOffset::Auto => Some(crate::estimate::pipeline::fit_offset_to_law(
-            &log, &noise, &designed,
+            &log,
+            &noise,
+            &designed,
+            spec.follower.friction_correction,
         )?),
     };
     if let Some(c) = offset_mm {

@@ -23,7 +23,7 @@ use super::retime::{
 };
 use super::sg;
 use super::twin::{TwinBias, TwinSource, TwinTruth};
-use crate::model::{ExpLaw, ForceLaw};
+use crate::model::{ExpLaw, ForceLaw, FrictionCorrection};
 use serde::Serialize;
 
 /// Where the filter's initial state comes from.
@@ -1218,7 +1218,14 @@ where
             };
             let id = identify_reduced(&survey.reduced, noise, None)?;
             let (lo, hi) = survey.position_range_mm;
-            offset_from_identification(&id, &ForceLaw::Exponential(*law), lo, hi)?
+            // The law given to the filter is taken as the strokes' mean.
+            offset_from_identification(
+                &id,
+                &ForceLaw::Exponential(*law),
+                FrictionCorrection::Midline,
+                lo,
+                hi,
+            )?
         }
     };
     let shifted;
@@ -3168,24 +3175,32 @@ pub fn fit_offset_by_identification(
     log: &CalibrationLog,
     noise: &SensorNoise,
     designed: &ForceLaw,
+    stroke: FrictionCorrection,
 ) -> Result<f64, IdentifyError> {
     let id = super::identify::identify(log, noise)?;
     let (lo, hi) = log.position_range_mm();
-    offset_from_identification(&id, designed, lo, hi)
+    offset_from_identification(&id, designed, stroke, lo, hi)
 }
 
 /// The encoder zero of a log against a designed law of any form: for an exponential law the
 /// identified law is matched to it ([`fit_offset_by_identification`]); for a tabulated or
 /// polynomial law, which identification's exponential cannot follow, the log's samples are
 /// ([`fit_offset_on_samples`]).
+///
+/// `stroke`: which stroke the design made follow the law (the spec's friction correction).
+/// A cam's contact friction lifts the loading stroke and lowers the unloading one by a share
+/// of the force (identification's mu_f): a loading-corrected design's law is matched to the
+/// identified loading stroke, (mu + mu_f) exp(k2 x) + F0. The constant friction d0 is not
+/// added: the rig's own friction is in it, which the design corrects for nothing.
 pub fn fit_offset_to_law(
     log: &CalibrationLog,
     noise: &SensorNoise,
     designed: &ForceLaw,
+    stroke: FrictionCorrection,
 ) -> Result<f64, IdentifyError> {
     match designed {
-        ForceLaw::Exponential(_) => fit_offset_by_identification(log, noise, designed),
-        _ => Ok(fit_offset_on_samples(log, noise, designed)),
+        ForceLaw::Exponential(_) => fit_offset_by_identification(log, noise, designed, stroke),
+        _ => Ok(fit_offset_on_samples(log, noise, designed, stroke)),
     }
 }
 
@@ -3196,8 +3211,9 @@ pub const OFFSET_FIT_SAMPLES: usize = 200_000;
 /// The encoder zero c (mm) that best explains the log's force by the designed law at x - c
 /// plus the rod's dynamics and friction: for each c the force left after the designed spring,
 /// F - F_d(x - c), is regressed on [xdd, xd, xd^3, sgn(xd)] (the position smoothed and
-/// differentiated with the default Savitzky-Golay kernels), and c minimises what the
-/// regression leaves. The spring is taken as designed, so that every mismatch of the force
+/// differentiated with the default Savitzky-Golay kernels) and on the friction that grows with
+/// the load about the `stroke` the design made follow the law (a share of F_d(x - c), on the
+/// stroke that does not follow it), and c minimises what the regression leaves. The spring is taken as designed, so that every mismatch of the force
 /// curve goes to the zero, as [`fit_position_offset`] does for an identified law. On the knee
 /// spec's tabulated law, matching identification's exponential instead put a log shifted by
 /// 0.5 mm at 0.453 mm (and a true one at -0.047 mm): an exponential cannot follow the table,
@@ -3208,8 +3224,9 @@ pub fn fit_offset_on_samples(
     log: &CalibrationLog,
     noise: &SensorNoise,
     designed: &ForceLaw,
+    stroke: FrictionCorrection,
 ) -> f64 {
-    use nalgebra::{Matrix4, Vector4};
+    use nalgebra::{DMatrix, DVector, Matrix4, Vector4};
     let sg::DefaultMotion {
         x,
         xd,
@@ -3223,8 +3240,17 @@ pub fn fit_offset_on_samples(
     }
     let unmeasured = log.unmeasured_force(half, n);
     let stride = n.div_ceil(OFFSET_FIT_SAMPLES).max(1);
-    // Each kept sample: position, force, and the dynamics' regressors.
-    let rows: Vec<(f64, f64, Vector4<f64>)> = (0..n)
+    // A cam's contact friction is a share of the force: where the design made the loading
+    // stroke follow the law, the unloading one lies that share below it, (sgn - 1) F_d; where
+    // the unloading one, (sgn + 1) F_d; about the strokes' mean, sgn F_d.
+    let stroke_sign = match stroke {
+        FrictionCorrection::Loading => -1.0,
+        FrictionCorrection::Unloading => 1.0,
+        FrictionCorrection::Midline | FrictionCorrection::None => 0.0,
+    };
+    // Each kept sample: position, force, the dynamics' regressors, and the load friction's
+    // sign factor.
+    let rows: Vec<(f64, f64, Vector4<f64>, f64)> = (0..n)
         .step_by(stride)
         .filter(|&i| !unmeasured[i])
         .map(|i| {
@@ -3232,31 +3258,44 @@ pub fn fit_offset_on_samples(
                 x[i],
                 log.force_n[half + i],
                 Vector4::new(xdd[i], xd[i], xd[i].powi(3), sgn[i]),
+                sgn[i] + stroke_sign,
             )
         })
         .collect();
     let mut ata = Matrix4::<f64>::zeros();
-    for (_, _, r) in &rows {
+    for (_, _, r, _) in &rows {
         ata += r * r.transpose();
     }
-    // Scaled to a unit diagonal; a regressor the log does not excite (no motion) drops out.
-    let d = Vector4::from_fn(|k, _| ata[(k, k)].sqrt());
-    let keep: Vec<usize> = (0..4).filter(|&k| d[k] > 0.0 && d[k].is_finite()).collect();
-    let scaled = nalgebra::DMatrix::from_fn(keep.len(), keep.len(), |a, b| {
-        ata[(keep[a], keep[b])] / (d[keep[a]] * d[keep[b]])
-    });
-    let inverse = scaled.clone().try_inverse();
+    // For each shift: the four fixed columns and the load friction's, g = s F_d(x - c), scaled
+    // to a unit diagonal; a regressor the log does not excite (no motion) drops out.
     let left = |c: f64| -> f64 {
         let mut yy = 0.0;
         let mut aty = Vector4::<f64>::zeros();
-        for (xi, fi, r) in &rows {
-            let y = fi - designed.force_n(xi - c);
+        let (mut gg, mut gy) = (0.0, 0.0);
+        let mut gr = Vector4::<f64>::zeros();
+        for (xi, fi, r, s) in &rows {
+            let fd = designed.force_n(xi - c);
+            let (y, g) = (fi - fd, s * fd);
             yy += y * y;
             aty += r * y;
+            gg += g * g;
+            gy += g * y;
+            gr += r * g;
         }
-        let b = nalgebra::DVector::from_fn(keep.len(), |a, _| aty[keep[a]] / d[keep[a]]);
-        let explained = inverse
-            .as_ref()
+        let entry = |a: usize, b: usize| match (a, b) {
+            (4, 4) => gg,
+            (4, k) | (k, 4) => gr[k],
+            (a, b) => ata[(a, b)],
+        };
+        let rhs = |a: usize| if a == 4 { gy } else { aty[a] };
+        let d: Vec<f64> = (0..5).map(|k| entry(k, k).sqrt()).collect();
+        let keep: Vec<usize> = (0..5).filter(|&k| d[k] > 0.0 && d[k].is_finite()).collect();
+        let scaled = DMatrix::from_fn(keep.len(), keep.len(), |a, b| {
+            entry(keep[a], keep[b]) / (d[keep[a]] * d[keep[b]])
+        });
+        let b = DVector::from_fn(keep.len(), |a, _| rhs(keep[a]) / d[keep[a]]);
+        let explained = scaled
+            .try_inverse()
             .map_or(0.0, |inv| (b.transpose() * inv * &b)[(0, 0)]);
         yy - explained
     };
@@ -3300,13 +3339,22 @@ fn minimise_shift(cost: impl Fn(f64) -> f64, lo: f64, hi: f64) -> f64 {
 fn offset_from_identification(
     id: &Identification,
     designed: &ForceLaw,
+    stroke: FrictionCorrection,
     lo: f64,
     hi: f64,
 ) -> Result<f64, IdentifyError> {
     use super::identify::Param;
     let value = |p| id.get(p).value;
+    // The stroke the law describes: the friction that grows with the load lifts the loading
+    // stroke's exponential part and lowers the unloading one's.
+    let load_friction = value(Param::MuF).unwrap_or(0.0)
+        * match stroke {
+            FrictionCorrection::Loading => 1.0,
+            FrictionCorrection::Unloading => -1.0,
+            FrictionCorrection::Midline | FrictionCorrection::None => 0.0,
+        };
     let measured = ExpLaw {
-        mu_n: value(Param::Mu).unwrap_or(f64::NAN),
+        mu_n: value(Param::Mu).unwrap_or(f64::NAN) + load_friction,
         k2_per_mm: value(Param::K2).unwrap_or(id.k2_quasi_static_per_mm),
         f0_n: value(Param::F0).unwrap_or(0.0),
     };
