@@ -1939,24 +1939,7 @@ fn a_cams_friction_that_grows_with_the_load_is_identified_and_taken_out_of_the_f
         // its loading stroke follow the law, the ankle's the strokes' mean, and the zero is
         // matched to that stroke of the identified model (matched to the mean, the paper's
         // came out 0.577 mm until 2026-12-02).
-        let text = std::fs::read_to_string(d.join("built.csv")).unwrap();
-        std::fs::write(d.join("zero.csv"), shifted(&text, 0.5)).unwrap();
-        let out = camspring(
-            d,
-            &[
-                "validate",
-                &path,
-                "zero.csv",
-                "--position-offset",
-                "auto",
-                "--tolerance",
-                "3%",
-                "--json",
-            ],
-        );
-        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-        assert_eq!(out.status.code(), Some(0), "{name}: {}", v["criteria"]);
-        let offset = v["position_offset_mm"].as_f64().unwrap();
+        let offset = zero_of_built_log_shifted(d, &path, 0.5);
         assert!((offset - 0.5).abs() < 0.05, "{name}: zero {offset} mm");
     }
 }
@@ -1972,23 +1955,27 @@ fn a_built_tabulated_parts_encoder_zero_is_found_with_its_contact_friction() {
     let d = dir.path();
     let knee = spec_path("knee.toml");
     simulate_built(d, &knee, "11");
-    let text = std::fs::read_to_string(d.join("built.csv")).unwrap();
-    std::fs::write(d.join("zero.csv"), shifted(&text, 0.5)).unwrap();
-    let out = camspring(
-        d,
-        &[
-            "validate",
-            &knee,
-            "zero.csv",
-            "--position-offset",
-            "auto",
-            "--tolerance",
-            "3%",
-            "--json",
-        ],
-    );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    assert_eq!(out.status.code(), Some(0), "{}", v["criteria"]);
-    let offset = v["position_offset_mm"].as_f64().unwrap();
+    let offset = zero_of_built_log_shifted(d, &knee, 0.5);
     assert!((offset - 0.5).abs() < 0.05, "zero {offset} mm");
+}
+
+/// The encoder zero `validate --position-offset auto` finds on `built.csv` in `dir` with its
+/// positions moved by `shift_mm`, against `spec`; the verdict must pass.
+fn zero_of_built_log_shifted(dir: &std::path::Path, spec: &str, shift_mm: f64) -> f64 {
+    let text = std::fs::read_to_string(dir.join("built.csv")).unwrap();
+    std::fs::write(dir.join("zero.csv"), shifted(&text, shift_mm)).unwrap();
+    let args = [
+        "validate",
+        spec,
+        "zero.csv",
+        "--position-offset",
+        "auto",
+        "--tolerance",
+        "3%",
+        "--json",
+    ];
+    let out = camspring(dir, &args);
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(out.status.code(), Some(0), "{spec}: {}", v["criteria"]);
+    v["position_offset_mm"].as_f64().unwrap()
 }

@@ -644,7 +644,7 @@ pub fn carry_delay_uncertainty(
     let (Some(plus), Some(minus)) = (at(fit.delay_s + std), at(fit.delay_s - std)) else {
         return;
     };
-    let mut change = [0.0; 7];
+    let mut change = [0.0; Param::ALL.len()];
     for p in Param::ALL {
         if let (Some(a), Some(b), Some(s)) = (
             plus.parameters.value(p),
